@@ -1,0 +1,1 @@
+"""The AMB estimation lab: browser server, per-tab sessions and headless CLI."""

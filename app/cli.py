@@ -1,0 +1,126 @@
+"""Command line of the lab.
+
+    python -m app [--host H] [--port P]        start the browser lab (default)
+    python -m app list [--json]                exercises and their parameters
+    python -m app run NAME [--set N=V ...] [--duration S] [--seed N] [--json]
+    python -m app bench [--json]               throughput benchmark
+
+Bad input (unknown exercise or parameter, non-numbers, NaN, out of range)
+exits with status 2 and one line naming the problem and the valid range.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+
+from lab_modules.exercises import get, registry
+from lab_modules.parameters import ParameterError
+
+USAGE_ERROR = 2
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="python -m app", description="AMB estimation lab")
+    parser.add_argument("--host", default="127.0.0.1", help="address to serve on (default 127.0.0.1)")
+    parser.add_argument("--port", type=int, default=8080, help="port to serve on (default 8080)")
+    sub = parser.add_subparsers(dest="command")
+    sub.add_parser("serve", help="start the browser lab (the default)")
+    listing = sub.add_parser("list", help="list exercises and their parameters")
+    listing.add_argument("--json", action="store_true", help="print JSON")
+    run = sub.add_parser("run", help="run one exercise headless and print its metrics")
+    run.add_argument("exercise")
+    run.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                     help="override a parameter (repeatable)")
+    run.add_argument("--duration", default=None, help="simulated seconds (default: the exercise's)")
+    run.add_argument("--seed", default=None, help="random seed (same as --set seed=N)")
+    run.add_argument("--json", action="store_true", help="print JSON")
+    bench = sub.add_parser("bench", help="closed-loop throughput benchmark")
+    bench.add_argument("--json", action="store_true", help="print JSON")
+    bench.add_argument("--seconds", type=float, default=2.0, help="simulated seconds per measurement")
+    return parser
+
+
+def _overrides(pairs: list[str], seed) -> dict:
+    overrides = {}
+    for pair in pairs:
+        name, sep, value = pair.partition("=")
+        if not sep or not name:
+            raise ParameterError(f"--set {pair!r} is not NAME=VALUE")
+        overrides[name.strip()] = value.strip()
+    if seed is not None:
+        overrides["seed"] = seed
+    return overrides
+
+
+def _duration(text, default: float) -> float:
+    if text is None:
+        return default
+    try:
+        value = float(text)
+    except ValueError:
+        raise ParameterError(f"--duration={text!r} is not a number: expected 0.01 ... 60 s") from None
+    if not (math.isfinite(value) and 0.01 <= value <= 60.0):
+        raise ParameterError(f"--duration={text!r} is out of range: expected 0.01 ... 60 s")
+    return value
+
+
+def _jsonable(value):
+    """Plain Python numbers for json (numpy scalars, non-finite floats as strings)."""
+    if isinstance(value, dict):
+        return {k: _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if hasattr(value, "item"):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    return value
+
+
+def command_list(as_json: bool) -> int:
+    exercises = [{"name": e.name, "title": e.title, "worksheet": f"static/worksheets/{e.worksheet}",
+                  "parameters": [p.describe() for p in e.parameters]} for e in registry().values()]
+    if as_json:
+        print(json.dumps(_jsonable(exercises), indent=2, ensure_ascii=False))
+    else:
+        for e in exercises:
+            print(f"{e['name']}: {e['title']}")
+            for p in e["parameters"]:
+                rng = ", ".join(p["choices"]) if "choices" in p else f"{p['min']:g} ... {p['max']:g}"
+                print(f"  {p['name']:<24} default {p['default']!s:<12} [{rng}] {p['unit']}")
+    return 0
+
+
+def command_run(args) -> int:
+    exercise = get(args.exercise)
+    values = exercise.resolve(_overrides(args.set, args.seed))
+    duration = _duration(args.duration, exercise.default_duration_s)
+    result = {"exercise": exercise.name, "parameters": values,
+              "model": exercise.model(values), "metrics": exercise.metrics(values, duration)}
+    if args.json:
+        print(json.dumps(_jsonable(result), indent=2, ensure_ascii=False))
+    else:
+        for name, value in result["metrics"].items():
+            print(f"{name}: {value}")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    try:
+        if args.command == "list":
+            return command_list(args.json)
+        if args.command == "run":
+            return command_run(args)
+        if args.command == "bench":
+            from app.bench import main as bench_main
+            return bench_main(args.seconds, args.json)
+    except ParameterError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return USAGE_ERROR
+    from app.server import serve
+    serve(args.host, args.port)
+    return 0

@@ -1,0 +1,1 @@
+"""Physics, estimators, controllers and exercises of the AMB estimation lab."""

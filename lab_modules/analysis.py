@@ -1,0 +1,159 @@
+"""Linear analysis of the bearing-axis loop: closed-loop poles, noise-driven
+RMS values and the largest tolerable gain factor.
+
+The loop is assembled from the discrete plant model (eq. 1, 3-4, 12), a
+discrete controller and the *steady-state* Kalman filter of eq. 2, and
+returned as a discrete ``control.StateSpace`` so that python-control's
+functions (poles, step responses) apply directly.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import control
+import numpy as np
+import scipy.linalg
+
+#: Inputs and outputs of the loop returned by ``closed_loop``.
+LOOP_INPUTS = ("reference_m", "disturbance_n", "process_v", "process_i", "noise_x_v", "noise_i_v")
+LOOP_OUTPUTS = ("x_m", "current_reference_v", "current_a")
+
+
+def steady_state_kalman(model: control.StateSpace, Q, R):
+    """Steady-state gain K and predicted covariance P of eq. 2 (k -> infinity).
+
+    Solves the filter's Riccati equation with python-control's ``dlqe``; the
+    returned K is eq. 2's correction gain P C^T (C P C^T + R)^-1, not the
+    predictor gain A K that ``dlqe`` itself returns.
+    """
+    A, C = np.asarray(model.A), np.asarray(model.C)
+    _, P, _ = control.dlqe(A, np.eye(A.shape[0]), C, Q, R)
+    K = P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
+    return K, P
+
+
+@dataclass(frozen=True)
+class Loop:
+    """A closed bearing-axis loop and where its parts sit in the state vector."""
+
+    system: control.StateSpace   # inputs LOOP_INPUTS, outputs LOOP_OUTPUTS
+    loop_states: slice           # states that take part in the feedback loop
+
+
+def closed_loop(model: control.StateSpace, controller: control.StateSpace,
+                kalman_gain: np.ndarray, use_estimate: bool) -> Loop:
+    """Assemble plant, controller and steady-state filter into one discrete system.
+
+    State z = (plant s, controller x_c, filter prediction x_p).  With
+    y = C s + eta and x_hat = x_p + K (y - C x_p), the fed-back position is
+    the measurement K_mx x_d + eta_x or the estimate K_mx x_hat[0].  With
+    measured feedback the filter only watches, so its states are excluded from
+    ``loop_states`` (and from the loop's poles).
+
+    Parameters
+    ----------
+    model : control.StateSpace
+        Discrete plant = filter model, inputs (i_ref [V], f_z [N]), outputs (position [V], current [V]).
+    controller : control.StateSpace
+        Discrete controller, control error [V] -> i_ref [V].
+    kalman_gain : ndarray
+        Steady-state correction gain K of eq. 2.
+    use_estimate : bool
+        Feed back the estimated instead of the measured position.
+    """
+    A, B, C = (np.asarray(M) for M in (model.A, model.B, model.C))
+    Ac, Bc, Cc, Dc = (np.atleast_2d(np.asarray(M)) for M in
+                      (controller.A, controller.B, controller.C, controller.D))
+    n, nc = A.shape[0], Ac.shape[0]
+    K = np.asarray(kalman_gain)
+    Bu, Bf = B[:, :1], B[:, 1:2]
+    k_mx = np.max(np.abs(C[0]))
+    I = np.eye(n)
+    # fed-back position [V] = Fs s + Fp x_p + Fn eta
+    if use_estimate:
+        h = np.zeros((1, n))
+        h[0, 0] = k_mx
+        Fs, Fp, Fn = h @ K @ C, h @ (I - K @ C), h @ K
+    else:
+        Fs, Fp, Fn = C[:1], np.zeros((1, n)), np.array([[1.0, 0.0]])
+    G = np.zeros((n, 2))
+    G[1, 0], G[2, 1] = 1.0, 1.0      # process noise on v and i (eq. 17's structure)
+    Acl = np.block([
+        [A - Bu @ Dc @ Fs, Bu @ Cc, -Bu @ Dc @ Fp],
+        [-Bc @ Fs, Ac, -Bc @ Fp],
+        [A @ K @ C - Bu @ Dc @ Fs, Bu @ Cc, A @ (I - K @ C) - Bu @ Dc @ Fp],
+    ])
+    reference = np.vstack([Bu @ Dc, Bc, Bu @ Dc]) * k_mx          # input in metres
+    disturbance = np.vstack([Bf, np.zeros((nc, 1)), np.zeros((n, 1))])
+    process = np.vstack([G, np.zeros((nc, 2)), np.zeros((n, 2))])
+    sensor = np.vstack([-Bu @ Dc @ Fn, -Bc @ Fn, A @ K - Bu @ Dc @ Fn])
+    Bcl = np.hstack([reference, disturbance, process, sensor])
+    x_row = np.zeros((1, 2 * n + nc))
+    x_row[0, 0] = 1.0
+    current_row = np.zeros((1, 2 * n + nc))
+    current_row[0, 2] = 1.0
+    u_row = np.hstack([-Dc @ Fs, Cc, -Dc @ Fp])
+    Ccl = np.vstack([x_row, u_row, current_row])
+    Dcl = np.zeros((3, Bcl.shape[1]))
+    Dcl[1] = np.hstack([Dc[0] * k_mx, [0.0, 0.0, 0.0], (-Dc @ Fn)[0]])
+    system = control.ss(Acl, Bcl, Ccl, Dcl, model.dt,
+                        inputs=LOOP_INPUTS, outputs=LOOP_OUTPUTS)
+    loop_states = slice(0, 2 * n + nc) if use_estimate else slice(0, n + nc)
+    return Loop(system, loop_states)
+
+
+def loop_poles(loop: Loop) -> np.ndarray:
+    """Closed-loop poles (z-plane) of the states that take part in the feedback."""
+    A = np.asarray(loop.system.A)[loop.loop_states, loop.loop_states]
+    return np.linalg.eigvals(A)
+
+
+def noise_rms(loop: Loop, input_variances: dict[str, float]) -> dict[str, float]:
+    """Steady-state RMS of the loop outputs driven by white noise inputs.
+
+    Solves the discrete Lyapunov equation X = A X A^T + B W B^T (scipy) after
+    balancing the state scaling.  Returns ``inf`` for every
+    output when the loop is unstable.
+    """
+    sys = loop.system
+    A, B, C, D = (np.asarray(M) for M in (sys.A, sys.B, sys.C, sys.D))
+    if np.max(np.abs(np.linalg.eigvals(A))) >= 1.0:
+        return {name: float("inf") for name in LOOP_OUTPUTS}
+    columns = [LOOP_INPUTS.index(name) for name in input_variances]
+    Bn, Dn = B[:, columns], D[:, columns]
+    W = np.diag(list(input_variances.values()))
+    # balance A by a diagonal similarity: states in m, m/s, A and V differ by 1e6
+    _, (scale, _) = scipy.linalg.matrix_balance(A, permute=False, separate=True)
+    As = A / scale[:, None] * scale[None, :]
+    Bs = Bn / scale[:, None]
+    Xs = scipy.linalg.solve_discrete_lyapunov(As, Bs @ W @ Bs.T)
+    X = Xs * scale[:, None] * scale[None, :]
+    covariance = C @ X @ C.T + Dn @ W @ Dn.T
+    return dict(zip(LOOP_OUTPUTS, np.sqrt(np.maximum(np.diag(covariance), 0.0))))
+
+
+def largest_gain_factor(rms_at_gain, bound: float, low: float = 0.05,
+                        high: float = 10.0, tolerance: float = 1e-3) -> float:
+    """Largest gain factor g in [low, high] with ``rms_at_gain(g) <= bound``.
+
+    Bisection from the stable side; assumes the RMS rises with g above the
+    smallest stabilising gain (it does for a PID on this plant).  Returns 0
+    if even ``low`` violates the bound and ``high`` if the bound is never hit.
+    """
+    if not rms_at_gain(low) <= bound:
+        return 0.0
+    if rms_at_gain(high) <= bound:
+        return high
+    while high - low > tolerance:
+        mid = 0.5 * (low + high)
+        if rms_at_gain(mid) <= bound:
+            low = mid
+        else:
+            high = mid
+    return low
+
+
+def z_to_s(poles_z: np.ndarray, sample_time_s: float) -> np.ndarray:
+    """Map discrete poles to the equivalent continuous ones, s = ln(z) / T [rad/s]."""
+    return np.log(np.asarray(poles_z, dtype=complex)) / sample_time_s

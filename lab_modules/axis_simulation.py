@@ -1,0 +1,189 @@
+"""One experiment on the bearing axis: its physical set-up, its linear
+analysis and its time simulation, all from the same numbers.
+
+``AxisSetup`` says what the rig, the noise, the filter and the controller are;
+``AxisSimulation`` runs it sample by sample through the compiled kernel of
+``closed_loop``.  Exercises build an ``AxisSetup`` from their parameters.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from functools import cached_property
+
+import control
+import numpy as np
+
+from . import analysis, closed_loop
+from .amb_axis import RIG, BearingAxis
+from .estimators import KalmanFilter
+
+
+@dataclass(frozen=True)
+class AxisSetup:
+    """Physical set-up of one bearing-axis experiment (SI units throughout).
+
+    Noise standard deviations are per sample (T = 50 µs).  The process noise
+    enters v and i as in eq. 17's diagonal Q; ``process_force_n`` is the
+    equivalent force, so q_vv = (process_force_n T / m)**2.
+    """
+
+    controller: control.StateSpace
+    use_estimate: bool = False
+    nonlinear: bool = True
+    sensor_lag_s: float = 0.0
+    sensor_noise_m: float = 1.33e-6
+    current_noise_a: float = 1.87
+    process_force_n: float = 0.5
+    process_current_a: float = 1e-3
+    filter_q_velocity: float | None = None   # m^2/s^2; None: matched to the plant
+    filter_q_current: float | None = None    # A^2; None: matched to the plant
+    filter_r_position: float | None = None   # V^2; None: matched to the sensor
+    filter_r_current: float | None = None    # V^2; None: matched to the sensor
+    reference_step_m: float = 0.0
+    disturbance_step_n: float = 0.0
+    step_period_s: float = 0.1
+    rig: BearingAxis = RIG
+
+    # -- the plant's true noise ------------------------------------------------
+    @property
+    def process_velocity_sigma(self) -> float:
+        """Per-sample velocity noise [m/s] equivalent to ``process_force_n``."""
+        return self.process_force_n * self.rig.sample_time_s / self.rig.equivalent_mass_kg
+
+    @property
+    def noise_sigma(self) -> np.ndarray:
+        """Scales of the four noise draws per sample: v [m/s], i [A], sensor x [V], sensor i [V]."""
+        rig = self.rig
+        return np.array([self.process_velocity_sigma, self.process_current_a,
+                         rig.position_sensor_gain_v_per_m * self.sensor_noise_m,
+                         rig.current_sensor_gain_v_per_a * self.current_noise_a])
+
+    # -- the filter (eq. 2) ----------------------------------------------------
+    @cached_property
+    def model(self) -> control.StateSpace:
+        """Discrete linear model used by the filter and the analysis."""
+        return self.rig.discrete_model(self.sensor_lag_s)
+
+    @property
+    def filter_Q(self) -> np.ndarray:
+        q_v = self.process_velocity_sigma**2 if self.filter_q_velocity is None else self.filter_q_velocity
+        q_i = self.process_current_a**2 if self.filter_q_current is None else self.filter_q_current
+        Q = np.zeros((self.model.nstates, self.model.nstates))
+        Q[1, 1], Q[2, 2] = q_v, q_i
+        return Q
+
+    @property
+    def filter_R(self) -> np.ndarray:
+        matched = self.noise_sigma[2:] ** 2
+        r_x = matched[0] if self.filter_r_position is None else self.filter_r_position
+        r_i = matched[1] if self.filter_r_current is None else self.filter_r_current
+        return np.diag([r_x, r_i])
+
+    @cached_property
+    def steady_state_filter(self) -> tuple[np.ndarray, np.ndarray]:
+        """(K, P) of eq. 2 in steady state."""
+        return analysis.steady_state_kalman(self.model, self.filter_Q, self.filter_R)
+
+    # -- linear analysis -------------------------------------------------------
+    def loop(self, use_estimate: bool | None = None, gain_factor: float = 1.0) -> analysis.Loop:
+        """The closed loop (steady-state filter) with the controller scaled by ``gain_factor``."""
+        use_estimate = self.use_estimate if use_estimate is None else use_estimate
+        return analysis.closed_loop(self.model, gain_factor * self.controller,
+                                    self.steady_state_filter[0], use_estimate)
+
+    def noise_rms(self, use_estimate: bool | None = None, gain_factor: float = 1.0) -> dict:
+        """Steady-state RMS of x [m], i_ref [V] and i [A] driven by the plant's and sensors' noise."""
+        sigma = self.noise_sigma
+        variances = dict(process_v=sigma[0] ** 2, process_i=sigma[1] ** 2,
+                         noise_x_v=sigma[2] ** 2, noise_i_v=sigma[3] ** 2)
+        return analysis.noise_rms(self.loop(use_estimate, gain_factor), variances)
+
+    def with_changes(self, **changes) -> "AxisSetup":
+        return replace(self, **changes)
+
+
+class AxisSimulation:
+    """Time simulation of an ``AxisSetup``: state, noise stream and traces.
+
+    Each instance owns its random generator (seeded), so two simulations
+    never share a stream; ``advance`` is safe to call from a worker thread
+    while other simulations run on other threads.
+    """
+
+    def __init__(self, setup: AxisSetup, seed: int = 0):
+        self.setup = setup
+        self.rng = np.random.default_rng(seed)
+        rig, model = setup.rig, setup.model
+        n = model.nstates
+        self.plant = np.zeros(4)
+        A, B = np.asarray(model.A), np.asarray(model.B)
+        initial_P = np.diag([(10e-6) ** 2, (1e-3) ** 2, 0.1**2, (10e-6) ** 2][:n])
+        self.filter = KalmanFilter(A, B[:, 0], model.C, setup.filter_Q, np.diag(setup.filter_R),
+                                   np.zeros(n), initial_P)
+        controller = setup.controller
+        self._ctrl_matrices = tuple(np.ascontiguousarray(np.atleast_2d(np.asarray(M, dtype=float)))
+                                    for M in (controller.A, controller.B, controller.C, controller.D))
+        self.ctrl = np.zeros(self._ctrl_matrices[0].shape[0])
+        self._plant_linear = self._padded_plant(A, B)
+        self._physics = np.array([rig.equivalent_mass_kg, rig.force_factor_n_m2_per_a2, rig.i0_a,
+                                  rig.delta0_m, np.cos(rig.pole_angle_rad), rig.amplifier_lag_s,
+                                  rig.amplifier_gain_a_per_v, setup.sensor_lag_s, rig.sample_time_s,
+                                  rig.position_sensor_gain_v_per_m, rig.current_sensor_gain_v_per_a])
+        self._u_limit = rig.current_limit_a / rig.amplifier_gain_a_per_v
+        self.step = 0
+        self.status = closed_loop.OK
+
+    @staticmethod
+    def _padded_plant(A, B):
+        """Exact discrete plant on (x, v, i, x_d); without a lag x_d is x."""
+        n = A.shape[0]
+        A4, Bu, Bf = np.zeros((4, 4)), np.zeros(4), np.zeros(4)
+        A4[:n, :n], Bu[:n], Bf[:n] = A, B[:, 0], B[:, 1]
+        if n == 3:
+            A4[3, :3], Bu[3], Bf[3] = A[0], B[0, 0], B[0, 1]
+        return A4, Bu, Bf
+
+    @property
+    def time_s(self) -> float:
+        return self.step * self.setup.rig.sample_time_s
+
+    def inputs(self, n_steps: int) -> tuple[np.ndarray, np.ndarray]:
+        """Reference [m] and disturbance force [N] for the next samples: square
+        waves of period ``step_period_s`` (first half zero, second half on)."""
+        setup, T = self.setup, self.setup.rig.sample_time_s
+        t = (self.step + np.arange(n_steps)) * T
+        on = (np.mod(t, setup.step_period_s) >= 0.5 * setup.step_period_s).astype(float)
+        return setup.reference_step_m * on, setup.disturbance_step_n * on
+
+    def advance(self, n_steps: int) -> np.ndarray:
+        """Run ``n_steps`` samples (fewer if the rotor touches down or diverges);
+        return the trace array, columns ``closed_loop.TRACE_COLUMNS``, with a
+        leading time column [s]."""
+        if self.status != closed_loop.OK or n_steps <= 0:
+            return np.empty((0, len(closed_loop.TRACE_COLUMNS) + 1))
+        reference, disturbance = self.inputs(n_steps)
+        noise = self.rng.standard_normal((n_steps, 4))
+        trace = np.empty((n_steps, len(closed_loop.TRACE_COLUMNS)))
+        kf = self.filter
+        status, done = closed_loop.run(
+            n_steps, self.plant, *self._plant_linear, self.setup.nonlinear, self._physics,
+            kf._x, kf.P, kf.A, kf.B, kf.C, kf.Q, kf.R_diag,
+            self.ctrl, *self._ctrl_matrices, self._u_limit, self.setup.use_estimate,
+            reference, disturbance, noise, self.setup.noise_sigma, self.setup.rig.touchdown_m, trace)
+        t = (self.step + np.arange(done)) * self.setup.rig.sample_time_s
+        self.step += done
+        self.status = status
+        return np.column_stack([t, trace[:done]])
+
+    def status_message(self) -> str:
+        """What happened, in words, for a stopped simulation ('' while running)."""
+        t_ms = self.time_s * 1e3
+        if self.status == closed_loop.TOUCHDOWN:
+            return (f"Touchdown at t = {t_ms:.1f} ms: the rotor left the air gap "
+                    f"(|x| >= {self.setup.rig.touchdown_m * 1e6:.0f} µm). The loop is unstable or "
+                    "saturated at these settings; lower the gain or the noise and reset.")
+        if self.status == closed_loop.DIVERGED:
+            return (f"Diverged at t = {t_ms:.1f} ms: the simulation produced non-finite values. "
+                    "Reset with other settings.")
+        return ""

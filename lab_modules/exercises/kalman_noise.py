@@ -1,0 +1,229 @@
+"""Exercise ``kalman_noise``: a Kalman filter against sensor noise.
+
+Paper 000 (Schuhmann, Hofmann, Werner), §II, Fig. 3 and Appendix.  One axis
+of the radial bearing (25 kg rotor) is held by the paper's PID (K = 0.65,
+T_I = 50 ms, T_D = 3 ms on the sensor voltages).  The integrated capacitive
+sensor is noisy (eq. 16: R_x = 7.1e-4 V^2, i.e. 1.33 µm at 20 mV/µm).  Feeding
+back the Kalman filter's estimate (eq. 2) instead of the measurement reduces
+the rotor's noise-driven motion and lets the gains rise (paper: about 80 % and
++75 %).
+
+Largest tolerable gain factor (the criterion, stated once here and in the
+worksheet): the largest common factor on K that keeps the rotor's
+noise-driven RMS displacement at or below the sensor's own noise sigma_x.
+Beyond it the loop turns sensor noise into more rotor motion than the noise
+itself; as the loop nears instability that motion grows without bound, so
+the criterion also excludes unstable gains.  It is evaluated on the linear
+model with the steady-state filter (discrete Lyapunov equation).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .. import analysis
+from ..amb_axis import DEFAULT_SENSOR_LAG_S, RIG
+from ..axis_simulation import AxisSetup, AxisSimulation
+from ..closed_loop import TRACE_COLUMNS
+from ..controllers import pid
+from ..parameters import Parameter
+from . import Analysis, Chart, Exercise, Series
+
+T = RIG.sample_time_s
+K_MX = RIG.position_sensor_gain_v_per_m
+K_MI = RIG.current_sensor_gain_v_per_a
+#: eq. 16: R = diag(7.1e-4 V^2, 1.4e-1 V^2) -> sensor noise in physical units
+PAPER_SENSOR_NOISE_UM = np.sqrt(7.1e-4) / K_MX * 1e6      # 1.33 µm
+PAPER_CURRENT_NOISE_A = np.sqrt(1.4e-1) / K_MI            # 1.87 A
+#: The plant's unmodelled force disturbance (per sample).  The paper does not
+#: give one; 0.5 N is small against the sensor noise, as the paper's Fig. 3
+#: implies (the filter removes most of the motion, so noise dominated it).
+DISTURBANCE_FORCE_N = 0.5
+AMPLIFIER_NOISE_A = 1e-3
+MATCHED_Q_VELOCITY = (DISTURBANCE_FORCE_N * T / RIG.equivalent_mass_kg) ** 2
+
+P = Parameter
+PARAMETERS = (
+    P("sensor_noise_um", "Position sensor noise σ", "µm", round(PAPER_SENSOR_NOISE_UM, 4), 0.0, 10.0,
+      "Standard deviation of the position sensor's white noise (paper eq. 16: 1.33 µm).",
+      step=0.01, group="Noise"),
+    P("current_noise_a", "Current sensor noise σ", "A", round(PAPER_CURRENT_NOISE_A, 4), 0.0, 5.0,
+      "Standard deviation of the current sensor's white noise (paper eq. 16: 1.87 A).",
+      step=0.01, group="Noise"),
+    P("disturbance_force_n", "Unmodelled force σ", "N", DISTURBANCE_FORCE_N, 0.0, 50.0,
+      "Random force on the rotor, per 50 µs sample (the plant's process noise).",
+      step=0.1, group="Noise"),
+    P("filter_q_velocity", "Filter Q_vv", "m²/s²", MATCHED_Q_VELOCITY, 1e-16, 1e-6,
+      "Filter's process-noise variance on v per sample (eq. 17's q_22); default matches the plant.",
+      log=True, group="Kalman filter"),
+    P("filter_q_current", "Filter Q_ii", "A²", AMPLIFIER_NOISE_A**2, 1e-10, 1.0,
+      "Filter's process-noise variance on i per sample (eq. 17's q_33); default matches the plant.",
+      log=True, group="Kalman filter"),
+    P("filter_r_position", "Filter R_x", "V²", 7.1e-4, 1e-7, 1e-1,
+      "Filter's position-measurement variance (eq. 16: 7.1e-4 V²).", log=True, group="Kalman filter"),
+    P("filter_r_current", "Filter R_i", "V²", 1.4e-1, 1e-4, 10.0,
+      "Filter's current-measurement variance (eq. 16: 0.14 V²).", log=True, group="Kalman filter"),
+    P("feedback", "Feedback source", "", "measured", choices=("measured", "estimated"),
+      description="Position the PID acts on: the sensor's or the filter's (undelayed) estimate.",
+      group="Controller"),
+    P("gain_factor", "Common gain factor", "×", 1.0, 0.1, 4.0,
+      "Multiplies the PID gain K (paper: +75 % possible with the filter).", step=0.01, group="Controller"),
+    P("pid_gain", "PID gain K", "V/V", 0.65, 0.05, 5.0,
+      "Proportional gain on the sensor voltage (paper §IV: 0.65).", step=0.01, group="Controller"),
+    P("integral_time_ms", "Integral time T_I", "ms", 50.0, 1.0, 1000.0,
+      "PID integral time (paper §IV: 50 ms).", step=1.0, group="Controller"),
+    P("derivative_time_ms", "Derivative time T_D", "ms", 3.0, 0.1, 20.0,
+      "PID derivative time (paper §IV: 3 ms).", step=0.1, group="Controller"),
+    P("derivative_filter_us", "Derivative filter τ", "µs", 300.0, 50.0, 3000.0,
+      "Time constant of the derivative's first-order filter (not in the paper: T_D/10).",
+      step=10.0, group="Controller"),
+    P("force_law", "Plant force law", "", "nonlinear", choices=("nonlinear", "linear"),
+      description="True plant: eq. 10 (nonlinear) or its linearisation eq. 3.", group="Plant"),
+    P("sensor_lag_us", "Sensor lag T_mx", "µs", DEFAULT_SENSOR_LAG_S * 1e6, 0.0, 1000.0,
+      "Position sensor's demodulator lag, eq. 12 (not in the paper; 0 = ideal sensor).",
+      step=10.0, group="Plant"),
+    P("reference_step_um", "Reference step", "µm", 0.0, -100.0, 100.0,
+      "Amplitude of a square-wave reference position.", step=1.0, group="Excitation"),
+    P("disturbance_step_n", "Disturbance force step", "N", 0.0, -400.0, 400.0,
+      "Amplitude of a square-wave disturbance force f_z (eq. 11).", step=10.0, group="Excitation"),
+    P("step_period_ms", "Step period", "ms", 100.0, 10.0, 1000.0,
+      "Period of the reference and disturbance square waves.", step=10.0, group="Excitation"),
+    P("seed", "Random seed", "", 0, 0, 2**31 - 1, "Seed of this lab's noise.", integer=True,
+      step=1, group="Run"),
+    P("time_scale", "Time scale", "×", 0.01, 0.001, 1.0,
+      "Simulated seconds per wall-clock second in the browser (1 = real time).",
+      log=True, group="Run"),
+)
+
+GAIN_CRITERION = ("largest common gain factor at which the noise-driven RMS rotor displacement "
+                  "stays at or below the position sensor's noise sigma (unstable loops exceed it)")
+
+
+def setup(values: dict) -> AxisSetup:
+    """The physical set-up described by the exercise's parameter values."""
+    controller = pid(values["pid_gain"] * values["gain_factor"], values["integral_time_ms"] * 1e-3,
+                     values["derivative_time_ms"] * 1e-3, values["derivative_filter_us"] * 1e-6, T)
+    return AxisSetup(
+        controller=controller,
+        use_estimate=values["feedback"] == "estimated",
+        nonlinear=values["force_law"] == "nonlinear",
+        sensor_lag_s=values["sensor_lag_us"] * 1e-6,
+        sensor_noise_m=values["sensor_noise_um"] * 1e-6,
+        current_noise_a=values["current_noise_a"],
+        process_force_n=values["disturbance_force_n"],
+        process_current_a=AMPLIFIER_NOISE_A,
+        filter_q_velocity=values["filter_q_velocity"],
+        filter_q_current=values["filter_q_current"],
+        filter_r_position=values["filter_r_position"],
+        filter_r_current=values["filter_r_current"],
+        reference_step_m=values["reference_step_um"] * 1e-6,
+        disturbance_step_n=values["disturbance_step_n"],
+        step_period_s=values["step_period_ms"] * 1e-3,
+    )
+
+
+def largest_gain_factors(axis: AxisSetup, values: dict) -> dict[str, float]:
+    """``GAIN_CRITERION`` for both feedback sources (factor relative to the set gains)."""
+    bound = axis.sensor_noise_m
+    return {source: analysis.largest_gain_factor(
+                lambda g, est=(source == "estimated"): axis.noise_rms(est, g)["x_m"], bound,
+                low=0.25, high=10.0, tolerance=2e-3) * values["gain_factor"]
+            for source in ("measured", "estimated")}
+
+
+def pairs(values) -> list[list[float]]:
+    """Complex numbers as [re, im] pairs for JSON."""
+    return [[float(v.real), float(v.imag)] for v in np.sort_complex(np.asarray(values, dtype=complex))]
+
+
+class KalmanNoise(Exercise):
+    name = "kalman_noise"
+    title = "Kalman filter against sensor noise"
+    worksheet = "kalman_noise.md"
+    parameters = PARAMETERS
+    charts = (
+        Chart("Rotor position", "µm", (
+            Series("measured", "x_measured_m", 1e6, "#b0b0b0"),
+            Series("true", "x_true_m", 1e6, "#1f77b4"),
+            Series("estimated", "x_estimated_m", 1e6, "#d62728")),
+            band=("x_estimated_m", "x_sigma_m")),
+        Chart("Control current", "A", (
+            Series("coil current i", "current_a", 1.0, "#2ca02c"),)),
+    )
+
+    def model(self, values: dict) -> dict:
+        axis = setup(values)
+        A, B, C = (np.asarray(M) for M in (axis.model.A, axis.model.B, axis.model.C))
+        states = ["x [m]", "v [m/s]", "i [A]"] + (["x_d [m]"] if A.shape[0] == 4 else [])
+        return {"states": states, "inputs": ["i_ref [V]"], "outputs": ["K_mx x_d [V]", "K_mi i [V]"],
+                "sample_time_s": T, "A": A.tolist(), "B": B[:, :1].tolist(), "C": C.tolist(),
+                "Q": axis.filter_Q.tolist(), "R": axis.filter_R.tolist()}
+
+    def analyse(self, values: dict) -> Analysis:
+        axis = setup(values)
+        rms = {source: axis.noise_rms(source == "estimated")["x_m"] for source in ("measured", "estimated")}
+        limits = largest_gain_factors(axis, values)
+        K, _ = axis.steady_state_filter
+        A, C = np.asarray(axis.model.A), np.asarray(axis.model.C)
+        continuous = np.linalg.eigvals(np.asarray(RIG.continuous_model(axis.sensor_lag_s).A))
+        poles = {"open-loop plant": continuous,
+                 "closed loop": analysis.z_to_s(analysis.loop_poles(axis.loop()), T),
+                 "filter error": analysis.z_to_s(np.linalg.eigvals(A - A @ K @ C), T)}
+        reduction = 100.0 * (1.0 - rms["estimated"] / rms["measured"])
+        readouts = [
+            ("RMS displacement, measured feedback", rms["measured"] * 1e6, "µm"),
+            ("RMS displacement, estimated feedback", rms["estimated"] * 1e6, "µm"),
+            ("Reduction by the filter", reduction, "%"),
+            ("Kalman gain K_x (x ← position)", K[0, 0] * 1e6, "µm/V"),
+            ("Kalman gain K_v (v ← position)", K[1, 0] * 1e3, "mm/s/V"),
+            ("Largest gain factor, measured", limits["measured"], "×"),
+            ("Largest gain factor, estimated", limits["estimated"], "×"),
+            ("Ratio estimated / measured", limits["estimated"] / max(limits["measured"], 1e-9), "×"),
+        ]
+        return Analysis(readouts, poles, notes=[f"Gain criterion: {GAIN_CRITERION}."])
+
+    def simulation(self, values: dict) -> AxisSimulation:
+        return AxisSimulation(setup(values), seed=int(values["seed"]))
+
+    def metrics(self, values: dict, duration_s: float) -> dict:
+        axis = setup(values)
+        n_steps = int(round(duration_s / T))
+        settle = min(int(0.1 / T), n_steps // 5)
+        rms, peak_current, status = {}, {}, {}
+        for source in ("measured", "estimated"):
+            sim = AxisSimulation(axis.with_changes(use_estimate=source == "estimated"),
+                                 seed=int(values["seed"]))
+            trace = sim.advance(n_steps)
+            x = trace[settle:, 1 + TRACE_COLUMNS.index("x_true_m")]
+            rms[source] = float(np.sqrt(np.mean(x**2))) if x.size else float("nan")
+            peak_current[source] = float(np.max(np.abs(trace[:, 1 + TRACE_COLUMNS.index("current_a")])))
+            status[source] = sim.status_message() or "ok"
+        predicted = {s: axis.noise_rms(s == "estimated")["x_m"] for s in ("measured", "estimated")}
+        limits = largest_gain_factors(axis, values)
+        K, _ = axis.steady_state_filter
+        A, C = np.asarray(axis.model.A), np.asarray(axis.model.C)
+        loop_z = analysis.loop_poles(axis.loop())
+        return {
+            "rms_displacement_measured_feedback_um": rms["measured"] * 1e6,
+            "rms_displacement_estimated_feedback_um": rms["estimated"] * 1e6,
+            "oscillation_reduction_percent": 100.0 * (1.0 - rms["estimated"] / rms["measured"]),
+            "predicted_rms_displacement_measured_feedback_um": predicted["measured"] * 1e6,
+            "predicted_rms_displacement_estimated_feedback_um": predicted["estimated"] * 1e6,
+            "steady_state_kalman_gain": K.tolist(),
+            "closed_loop_poles": pairs(loop_z),
+            "closed_loop_poles_rad_per_s": pairs(analysis.z_to_s(loop_z, T)),
+            "filter_error_poles": pairs(np.linalg.eigvals(A - A @ K @ C)),
+            "max_gain_factor_measured": limits["measured"],
+            "max_gain_factor_estimated": limits["estimated"],
+            "max_gain_factor_ratio": limits["estimated"] / max(limits["measured"], 1e-9),
+            "gain_criterion": GAIN_CRITERION,
+            "peak_current_measured_feedback_a": peak_current["measured"],
+            "peak_current_estimated_feedback_a": peak_current["estimated"],
+            "status_measured_feedback": status["measured"],
+            "status_estimated_feedback": status["estimated"],
+            "duration_s": n_steps * T,
+            "rms_window_s": (n_steps - settle) * T,
+        }
+
+
+EXERCISE = KalmanNoise()
