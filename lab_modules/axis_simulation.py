@@ -134,6 +134,19 @@ class AxisSimulation:
         self.step = 0
         self.status = closed_loop.OK
 
+    def retuned(self, setup: AxisSetup) -> "AxisSimulation":
+        """A simulation with new settings that carries on from this one's state
+        (rotor, filter estimate and covariance, controller, time, noise stream),
+        so a slider move changes the running experiment instead of restarting it.
+        Parts whose size changed (filter order, controller order) start afresh."""
+        new = AxisSimulation(setup)
+        new.rng, new.step, new.plant[:] = self.rng, self.step, self.plant
+        if new.filter.dim_x == self.filter.dim_x:
+            new.filter._x[:], new.filter.P[:] = self.filter._x, self.filter.P
+        if new.ctrl.shape == self.ctrl.shape:
+            new.ctrl[:] = self.ctrl
+        return new
+
     @staticmethod
     def _padded_plant(A, B):
         """Exact discrete plant on (x, v, i, x_d); without a lag x_d is x."""
