@@ -113,6 +113,7 @@ class AxisSimulation:
 
     def __init__(self, setup: AxisSetup, seed: int = 0):
         self.setup = setup
+        self.seed = seed
         self.rng = np.random.default_rng(seed)
         rig, model = setup.rig, setup.model
         n = model.nstates

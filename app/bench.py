@@ -1,0 +1,114 @@
+"""``python -m app bench``: closed-loop throughput of the ``kalman_noise`` loop.
+
+Reports, from one run:
+* the compiled loop's speed as a multiple of real time on one core;
+* its speed against the same loop written in Python with filterpy's
+  ``KalmanFilter.predict/update`` (same seed and noise), and the largest
+  relative difference between the two loops' estimates;
+* the aggregate speed of two simulations on two threads against one.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+
+import numpy as np
+from filterpy.kalman import KalmanFilter as FilterpyKalman
+
+from lab_modules import closed_loop
+from lab_modules.exercises import get
+
+
+def _simulation(use_estimate: bool = True, seed: int = 0):
+    exercise = get("kalman_noise")
+    values = exercise.resolve({"feedback": "estimated" if use_estimate else "measured", "seed": seed})
+    return exercise.simulation(values)
+
+
+def filterpy_loop(sim, n_steps: int) -> np.ndarray:
+    """The loop of ``closed_loop.run`` in plain Python with filterpy's filter.
+
+    Uses a fresh ``sim``'s set-up and initial state and draws the same noise; returns
+    the corrected position estimates [m]."""
+    setup, kf_lab = sim.setup, sim.filter
+    n = kf_lab.dim_x
+    kf = FilterpyKalman(dim_x=n, dim_z=2, dim_u=1)
+    kf.F, kf.B = kf_lab.A[:n, :n].copy(), kf_lab.B[:n].reshape(n, 1).copy()
+    kf.H, kf.Q, kf.R = kf_lab.C[:, :n].copy(), kf_lab.Q[:n, :n].copy(), np.diag(kf_lab.R_diag)
+    kf.x, kf.P = kf_lab.x.reshape(n, 1).copy(), kf_lab.covariance.copy()
+    Ac, Bc, Cc, Dc = sim._ctrl_matrices
+    ctrl, plant = sim.ctrl.copy(), sim.plant.copy()
+    physics, sigma = sim._physics, setup.noise_sigma
+    K_mx, K_mi, T = physics[9], physics[10], physics[8]
+    reference, disturbance = sim.inputs(n_steps)
+    noise = np.random.default_rng(sim.seed).standard_normal((n_steps, 4))
+    A4, Bu4, Bf4 = sim._plant_linear
+    scratch = [np.empty(4) for _ in range(5)]
+    estimates = np.empty(n_steps)
+    for k in range(n_steps):
+        y = np.array([K_mx * plant[3] + sigma[2] * noise[k, 2], K_mi * plant[2] + sigma[3] * noise[k, 3]])
+        kf.update(y.reshape(2, 1))
+        estimates[k] = kf.x[0, 0]
+        feedback = K_mx * kf.x[0, 0] if setup.use_estimate else y[0]
+        e = K_mx * reference[k] - feedback
+        u = float(np.clip(Cc[0] @ ctrl + Dc[0, 0] * e, -sim._u_limit, sim._u_limit))
+        ctrl = Ac @ ctrl + Bc[:, 0] * e
+        kf.predict(u=np.array([[u]]))
+        if setup.nonlinear:
+            closed_loop._rk4_step(plant, u, disturbance[k], physics, T, *scratch)
+        else:
+            plant = A4 @ plant + Bu4 * u + Bf4 * disturbance[k]
+        if setup.sensor_lag_s <= 0:
+            plant[3] = plant[0]
+        plant[1] += sigma[0] * noise[k, 0]
+        plant[2] += sigma[1] * noise[k, 1]
+    return estimates
+
+
+def _throughput(seconds: float, threads: int) -> float:
+    """Simulated seconds per wall second, summed over ``threads`` parallel simulations."""
+    sims = [_simulation(seed=s) for s in range(threads)]
+    for sim in sims:
+        sim.advance(100)                                   # compile / warm up
+    n_steps = int(seconds / sims[0].setup.rig.sample_time_s)
+    workers = [threading.Thread(target=sim.advance, args=(n_steps,)) for sim in sims]
+    start = time.perf_counter()
+    for w in workers:
+        w.start()
+    for w in workers:
+        w.join()
+    return threads * seconds / (time.perf_counter() - start)
+
+
+def run(seconds: float = 2.0) -> dict:
+    single = _throughput(seconds, 1)
+    parallel = _throughput(seconds, 2)
+    n_ref = 4000
+    reference_sim, compiled_sim = _simulation(seed=7), _simulation(seed=7)
+    start = time.perf_counter()
+    reference = filterpy_loop(reference_sim, n_ref)
+    filterpy_speed = n_ref * reference_sim.setup.rig.sample_time_s / (time.perf_counter() - start)
+    compiled = compiled_sim.advance(n_ref)[:, 1 + closed_loop.TRACE_COLUMNS.index("x_estimated_m")]
+    scale = np.max(np.abs(reference))
+    return {
+        "exercise": "kalman_noise (nonlinear plant, estimated feedback, 4-state filter)",
+        "realtime_factor_one_core": single,
+        "realtime_factor_two_threads": parallel,
+        "parallel_speedup_two_threads": parallel / single,
+        "realtime_factor_filterpy_loop": filterpy_speed,
+        "speedup_vs_filterpy_loop": single / filterpy_speed,
+        "max_relative_estimate_difference_vs_filterpy": float(np.max(np.abs(compiled - reference)) / scale),
+        "targets": {"realtime_factor_one_core": 200, "speedup_vs_filterpy_loop": 50},
+    }
+
+
+def main(seconds: float = 2.0, as_json: bool = False) -> int:
+    result = run(seconds)
+    if as_json:
+        print(json.dumps(result, indent=2))
+    else:
+        for name, value in result.items():
+            print(f"{name}: {value}")
+    return 0
