@@ -195,8 +195,9 @@ class AxisSimulation:
         t_ms = self.time_s * 1e3
         if self.status == closed_loop.TOUCHDOWN:
             return (f"Touchdown at t = {t_ms:.1f} ms: the rotor left the air gap "
-                    f"(|x| >= {self.setup.rig.touchdown_m * 1e6:.0f} µm). The loop is unstable or "
-                    "saturated at these settings; lower the gain or the noise and reset.")
+                    f"(|x| >= {self.setup.rig.touchdown_m * 1e6:.0f} µm). The loop is unstable, saturated "
+                    "or cannot hold the load at these settings (a filter without a disturbance state "
+                    "leaves estimated feedback without integral action against a force); reset.")
         if self.status == closed_loop.DIVERGED:
             return (f"Diverged at t = {t_ms:.1f} ms: the simulation produced non-finite values. "
                     "Reset with other settings.")

@@ -39,7 +39,7 @@ class Parameter:
         if self.choices:
             return "one of " + ", ".join(self.choices)
         unit = f" {self.unit}" if self.unit else ""
-        return f"{self.minimum:g} ... {self.maximum:g}{unit}"
+        return f"{self.minimum:.10g} ... {self.maximum:.10g}{unit}"
 
     def parse(self, value) -> float | str:
         """Check one value (number or text) and return it in the parameter's type."""

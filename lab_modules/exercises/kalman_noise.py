@@ -194,7 +194,7 @@ class KalmanNoise(Exercise):
             sim = AxisSimulation(axis.with_changes(use_estimate=source == "estimated"),
                                  seed=int(values["seed"]))
             trace = sim.advance(n_steps)
-            x = trace[settle:, 1 + TRACE_COLUMNS.index("x_true_m")]
+            x = trace[min(settle, len(trace) // 5):, 1 + TRACE_COLUMNS.index("x_true_m")]
             rms[source] = float(np.sqrt(np.mean(x**2))) if x.size else float("nan")
             peak_current[source] = float(np.max(np.abs(trace[:, 1 + TRACE_COLUMNS.index("current_a")])))
             status[source] = sim.status_message() or "ok"
