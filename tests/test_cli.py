@@ -35,7 +35,7 @@ def run_app(*argv, timeout=120):
 def range_tokens(name):
     """Strings the error message must show for parameter ``name``: its valid values."""
     p = PARAMETERS[name]
-    return list(p.choices) if p.choices else [f"{p.minimum:g}", f"{p.maximum:g}"]
+    return list(p.choices) if p.choices else [f"{p.minimum:.10g}", f"{p.maximum:.10g}"]
 
 
 # -- list ------------------------------------------------------------------------
