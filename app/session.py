@@ -78,6 +78,7 @@ class LabSession:
             self.pole_plot = self._add_pole_plot({})
             gui.add_markdown("Poles in the s-plane (discrete poles mapped by s = ln z / T). "
                              "Right of the imaginary axis: unstable.")
+            self.pole_table = gui.add_markdown("")
         with panel.add_tab("Worksheet", viser.Icon.NOTEBOOK):
             gui.add_markdown((STATIC / "worksheets" / self.exercise.worksheet).read_text(encoding="utf-8"))
         panel.dock_right()
@@ -187,6 +188,12 @@ class LabSession:
         self.readouts.content = "\n".join(lines) + "\n\n" + "\n\n".join(f"*{n}*" for n in result.notes)
         data, _ = self._pole_data(result.poles)
         self.pole_plot.data = data
+        rows = ["| set | Re s [rad/s] | Im s [rad/s] | damping ζ |", "|---|---:|---:|---:|"]
+        for name, poles in result.poles.items():
+            for pole in sorted((p for p in poles if p.imag >= 0), key=lambda p: -p.real):
+                zeta = -pole.real / abs(pole) if abs(pole) > 0 else 1.0
+                rows.append(f"| {name} | {pole.real:.0f} | {pole.imag:.0f} | {zeta:.2f} |")
+        self.pole_table.content = "\n".join(rows)
         self.analysis_done.set()
 
     def _live_rms(self):
