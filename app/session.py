@@ -47,7 +47,6 @@ class LabSession:
         self.buffer = np.empty((0, len(TRACE_COLUMNS) + 1))
         self.inputs: dict[str, viser.GuiInputHandle] = {}
         self.analysis_version = 0
-        self.analysis_done = threading.Event()
         self._build_gui()
         self._request_analysis()
         self.thread = threading.Thread(target=self._run, name=f"lab-{client.client_id}", daemon=True)
@@ -194,7 +193,6 @@ class LabSession:
                 zeta = -pole.real / abs(pole) if abs(pole) > 0 else 1.0
                 rows.append(f"| {name} | {pole.real:.0f} | {pole.imag:.0f} | {zeta:.2f} |")
         self.pole_table.content = "\n".join(rows)
-        self.analysis_done.set()
 
     def _live_rms(self):
         if len(self.buffer) < 10:

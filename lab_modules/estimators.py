@@ -60,7 +60,7 @@ def predict(x, P, A, B, u, Q, work_x, work_P):
 
 
 @numba.njit(**_JIT)
-def update_scalar(x, P, c_row, y, r, gain, work_P):
+def update_scalar(x, P, c_row, y, r, gain):
     """Eq. 2, correction with one scalar measurement y = c x + eta, var(eta) = r.
 
     Joseph form P = M P M^T + r K K^T with M = I - K c.  Because M is the
@@ -97,10 +97,10 @@ def update_scalar(x, P, c_row, y, r, gain, work_P):
 
 
 @numba.njit(**_JIT)
-def update(x, P, C, y, R_diag, gain, work_P):
+def update(x, P, C, y, R_diag, gain):
     """Eq. 2, correction with the measurement vector y (diagonal R)."""
     for m in range(C.shape[0]):
-        update_scalar(x, P, C[m], y[m], R_diag[m], gain[m], work_P)
+        update_scalar(x, P, C[m], y[m], R_diag[m], gain[m])
 
 
 class KalmanFilter:
@@ -145,7 +145,7 @@ class KalmanFilter:
     def update(self, y) -> None:
         """Correction step of eq. 2 with measurement vector y."""
         update(self._x, self.P, self.C, np.asarray(y, dtype=float), self.R_diag,
-               self.gain, self._work_P)
+               self.gain)
 
 
 def pad_square(M) -> np.ndarray:
