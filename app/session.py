@@ -158,9 +158,7 @@ class LabSession:
 
     def _on_button(self, which: str) -> None:
         with self.lock:
-            if which == "Reset":
-                self._reset()
-            elif which == "Run" and self.simulation.status_message():
+            if which == "Reset" or which == "Run" and self.simulation.status_message():
                 self._reset()
             self.running = which != "Pause"
         self.status.content = "**Running**" if self.running else "**Paused**"

@@ -99,7 +99,7 @@ class AxisSetup:
                          noise_x_v=sigma[2] ** 2, noise_i_v=sigma[3] ** 2)
         return analysis.noise_rms(self.loop(use_estimate, gain_factor), variances)
 
-    def with_changes(self, **changes) -> "AxisSetup":
+    def with_changes(self, **changes) -> AxisSetup:
         return replace(self, **changes)
 
 
@@ -135,7 +135,7 @@ class AxisSimulation:
         self.step = 0
         self.status = closed_loop.OK
 
-    def retuned(self, setup: AxisSetup) -> "AxisSimulation":
+    def retuned(self, setup: AxisSetup) -> AxisSimulation:
         """A simulation with new settings that carries on from this one's state
         (rotor, filter estimate and covariance, controller, time, noise stream),
         so a slider move changes the running experiment instead of restarting it.
