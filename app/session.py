@@ -211,15 +211,16 @@ class LabSession:
         self.error.content = ""
         with self.lock:
             self.values[parameter.name] = value
-            if parameter.name == "time_scale":
-                return
+        if parameter.name == "time_scale":
+            return
+        self._request_analysis()                      # readouts first: they are what the student watches
+        with self.lock:
             if parameter.name == "seed":
                 self._reset()
             else:
                 self.simulation = self.exercise.retune(self.simulation, self.values)
         if self.scene is not None:
             self.scene.update(dict(self.values))
-        self._request_analysis()
 
     def _on_upload(self, uploaded) -> None:
         try:

@@ -19,6 +19,8 @@ model with the steady-state filter (discrete Lyapunov equation).
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from .. import analysis
@@ -99,9 +101,14 @@ GAIN_CRITERION = ("largest common gain factor at which the noise-driven RMS roto
                   "stays at or below the position sensor's noise sigma (unstable loops exceed it)")
 
 
+#: The PID for given gains, remembered: most slider moves leave the gains alone,
+#: and the Tustin discretisation is a noticeable part of a readout update.
+cached_pid = functools.lru_cache(maxsize=128)(pid)
+
+
 def setup(values: dict) -> AxisSetup:
     """The physical set-up described by the exercise's parameter values."""
-    controller = pid(values["pid_gain"] * values["gain_factor"], values["integral_time_ms"] * 1e-3,
+    controller = cached_pid(values["pid_gain"] * values["gain_factor"], values["integral_time_ms"] * 1e-3,
                      values["derivative_time_ms"] * 1e-3, values["derivative_filter_us"] * 1e-6, T)
     return AxisSetup(
         controller=controller,
