@@ -134,6 +134,28 @@ class RotorGeometry:
         return self.bearing_m - self.stack_length_m / 2, self.bearing_m + self.stack_length_m / 2
 
 
+def assemble_beam(node_z_m: np.ndarray, bending_stiffness_n_m2: float, mass_per_length_kg_m: float):
+    """Global stiffness and consistent mass matrices of a uniform beam on the given nodes."""
+    n_dof = 2 * len(node_z_m)
+    K, M = np.zeros((n_dof, n_dof)), np.zeros((n_dof, n_dof))
+    for e, l in enumerate(np.diff(node_z_m)):
+        Ke, Me = beam_element(l, bending_stiffness_n_m2, mass_per_length_kg_m)
+        dofs = slice(2 * e, 2 * e + 4)
+        K[dofs, dofs] += Ke
+        M[dofs, dofs] += Me
+    return K, M
+
+
+def solve_modes(K: np.ndarray, M: np.ndarray, constrained_dofs=()) -> tuple[np.ndarray, np.ndarray]:
+    """Natural angular frequencies [rad/s] (ascending) and mass-normalised shapes
+    (all degrees of freedom, zeros at the constrained ones) of K phi = omega^2 M phi."""
+    free = np.setdiff1d(np.arange(K.shape[0]), constrained_dofs)
+    omega_sq, vectors = scipy.linalg.eigh(K[np.ix_(free, free)], M[np.ix_(free, free)])
+    shapes = np.zeros((K.shape[0], len(free)))
+    shapes[free] = vectors
+    return np.sqrt(np.maximum(omega_sq, 0.0)), shapes
+
+
 class FlexibleRotor:
     """Finite-element model of the rotor on its pivot, and its modes.
 
@@ -146,15 +168,8 @@ class FlexibleRotor:
         key_points = [0.0, g.length_m, g.pivot_m, *g.stack_ends_m, g.bearing_m, g.hub_position_m]
         z = np.concatenate([np.linspace(0.0, g.length_m, elements + 1), key_points])
         self.node_z_m = np.unique(np.round(z, 9))
-        n_dof = 2 * len(self.node_z_m)
-        self.K, self.M = np.zeros((n_dof, n_dof)), np.zeros((n_dof, n_dof))
-        stiffness = STEEL_YOUNGS_PA * np.pi * g.shaft_diameter_m**4 / 64
-        mass_per_length = STEEL_DENSITY_KG_M3 * np.pi / 4 * g.shaft_diameter_m**2
-        for e, l in enumerate(np.diff(self.node_z_m)):
-            Ke, Me = beam_element(l, stiffness, mass_per_length)
-            dofs = slice(2 * e, 2 * e + 4)
-            self.K[dofs, dofs] += Ke
-            self.M[dofs, dofs] += Me
+        self.K, self.M = assemble_beam(self.node_z_m, STEEL_YOUNGS_PA * np.pi * g.shaft_diameter_m**4 / 64,
+                                       STEEL_DENSITY_KG_M3 * np.pi / 4 * g.shaft_diameter_m**2)
         low, high = g.stack_ends_m
         under_stack = np.flatnonzero((self.node_z_m >= low - 1e-9) & (self.node_z_m <= high + 1e-9))
         for node in under_stack:
@@ -176,13 +191,9 @@ class FlexibleRotor:
 
     @cached_property
     def _modes(self) -> tuple[np.ndarray, np.ndarray]:
-        free = np.setdiff1d(np.arange(self.K.shape[0]), self.constrained_dofs)
-        omega_sq, vectors = scipy.linalg.eigh(self.K[np.ix_(free, free)], self.M[np.ix_(free, free)])
-        shapes = np.zeros((self.K.shape[0], len(free)))
-        shapes[free] = vectors                   # mass-normalised: shapes.T M shapes = I
-        # sign convention: every mode moves positively at the drive-free end
-        shapes *= np.where(shapes[-2] < 0, -1.0, 1.0)
-        return np.sqrt(np.maximum(omega_sq, 0.0)), shapes
+        omega, shapes = solve_modes(self.K, self.M, self.constrained_dofs)
+        # sign convention: every mode moves positively at the free end
+        return omega, shapes * np.where(shapes[-2] < 0, -1.0, 1.0)
 
     def natural_frequencies_hz(self, n_modes: int) -> np.ndarray:
         return self._modes[0][:n_modes] / (2 * np.pi)
@@ -346,13 +357,15 @@ class LoopSimulation:
     ``inputs(step, n)`` returns the deterministic inputs (reference [m],
     disturbance [N]) for the next n samples; random inputs are the force
     noise ``force_sigma_n`` and the sensors' noise (sigmas in V).  The run
-    stops when the rotor at the bearing leaves the air gap.
+    stops when the rotor at the bearing leaves the air gap or the coil current
+    exceeds the amplifier's limit (beyond it the linear model no longer holds).
     """
 
     columns = LOOP_OUTPUTS + ("reference_m",)
 
     def __init__(self, loop: control.StateSpace, inputs, force_sigma_n: float, noise_sigma_v: tuple[float, float],
-                 seed: int = 0, touchdown_m: float = RIG.touchdown_m, explain=lambda: ""):
+                 seed: int = 0, touchdown_m: float = RIG.touchdown_m,
+                 current_limit_a: float = RIG.current_limit_a, explain=lambda: ""):
         self.loop = loop
         self.sample_time_s = float(loop.dt)
         self.A, self.B, self.C, self.D = (np.asarray(M, dtype=float) for M in (loop.A, loop.B, loop.C, loop.D))
@@ -361,13 +374,16 @@ class LoopSimulation:
         self.sigma = np.array([force_sigma_n, *noise_sigma_v])
         self.rng = np.random.default_rng(seed)
         self.touchdown_m = touchdown_m
+        self.current_limit_a = current_limit_a
         self.explain = explain
+        self.stop_reason = ""
         self.step = 0
         self.stopped_at_s: float | None = None
 
     def carry_on_from(self, other: LoopSimulation) -> LoopSimulation:
         """Continue ``other``'s run (time, noise stream and, if the loop has the same order, state)."""
-        self.rng, self.step, self.stopped_at_s = other.rng, other.step, other.stopped_at_s
+        self.rng, self.step = other.rng, other.step
+        self.stopped_at_s, self.stop_reason = other.stopped_at_s, other.stop_reason
         if other.state.shape == self.state.shape:
             self.state[:] = other.state
         return self
@@ -386,10 +402,16 @@ class LoopSimulation:
             x = self.A @ x + drive[:, k]
         Y = self.C @ X + self.D @ U
         done = n_steps
-        out = np.flatnonzero(~(np.abs(Y[LOOP_OUTPUTS.index("x_bearing_m")]) < self.touchdown_m))
+        touchdown = ~(np.abs(Y[LOOP_OUTPUTS.index("x_bearing_m")]) < self.touchdown_m)
+        saturated = ~(np.abs(Y[LOOP_OUTPUTS.index("current_a")]) < self.current_limit_a)
+        out = np.flatnonzero(touchdown | saturated)
         if out.size:
             done = int(out[0]) + 1
             self.stopped_at_s = (self.step + done) * self.sample_time_s
+            self.stop_reason = (f"the rotor left the {self.touchdown_m * 1e6:.0f} µm air gap at the bearing"
+                                if touchdown[out[0]] else
+                                f"the coil current reached the amplifier's limit of {self.current_limit_a:.1f} A "
+                                "(rated force), where the linear model ends")
         else:
             self.state = x
         t = (self.step + np.arange(done)) * self.sample_time_s
@@ -399,5 +421,4 @@ class LoopSimulation:
     def status_message(self) -> str:
         if self.stopped_at_s is None:
             return ""
-        return (f"Touchdown at t = {self.stopped_at_s * 1e3:.1f} ms: the rotor left the "
-                f"{self.touchdown_m * 1e6:.0f} µm air gap at the bearing. {self.explain()}")
+        return f"Stopped at t = {self.stopped_at_s * 1e3:.1f} ms: {self.stop_reason}. {self.explain()}"

@@ -56,7 +56,8 @@ from ..flexible_rotor import (
     pid_compensator,
 )
 from ..parameters import Parameter
-from . import Analysis, Chart, Exercise, Series
+from ..rotor_scene import RotorScene
+from . import Analysis, Chart, Exercise, Plot, Series
 
 T = RIG.sample_time_s
 K_MX, K_MI = RIG.position_sensor_gain_v_per_m, RIG.current_sensor_gain_v_per_a
@@ -105,7 +106,7 @@ PARAMETERS = (
     P("modal_damping_percent", "Bending-mode damping ζ", "%", 100 * GEOMETRY.modal_damping, 0.0, 5.0,
       "Structural damping of the bending modes (not in the paper: 0.5 %).", step=0.1, group="Rotor"),
     P("shown_mode", "Mode shown in 3D", "", 3, 1, 6, "Mode shape animated in the 3D view.", integer=True,
-      step=1, group="Rotor"),
+      step=1, group="Sensor"),
     P("reference_step_um", "Reference step", "µm", 50.0, -100.0, 100.0,
       "Square-wave reference position (paper Fig. 8: 50 µm).", step=1.0, group="Excitation"),
     P("step_period_ms", "Step period", "ms", 100.0, 10.0, 1000.0, "Period of the reference square wave.",
@@ -285,7 +286,7 @@ def step_response(values: dict, duration_s: float = 0.03):
     time [s], rotor at the bearing [m], sensor reading [m]; cut at touchdown."""
     step_m = (values["reference_step_um"] or 50.0) * 1e-6
     response = control.step_response(loop(values), T=np.arange(0.0, duration_s, T), input=0)
-    outputs = np.asarray(response.outputs)[:, :] * step_m
+    outputs = np.asarray(response.outputs).reshape(len(LOOP_OUTPUTS), -1) * step_m
     bearing = outputs[LOOP_OUTPUTS.index("x_bearing_m")]
     reading = outputs[LOOP_OUTPUTS.index("sensor_reading_m")]
     beyond = np.flatnonzero(np.abs(bearing) >= RIG.touchdown_m)
@@ -307,9 +308,11 @@ def simulation_inputs(values: dict):
     return inputs
 
 
-def oscillation_frequency_hz(x_m: np.ndarray) -> float:
-    """Dominant frequency [Hz] of a trace (periodogram peak after removing a linear trend)."""
-    f, power = scipy.signal.periodogram(scipy.signal.detrend(x_m), fs=1 / T, nfft=max(8192, len(x_m)))
+def oscillation_frequency_hz(x_m: np.ndarray, window_s: float = 0.02) -> float:
+    """Dominant frequency [Hz] at the end of a trace: periodogram peak of its last
+    ``window_s`` after removing a linear trend (a growing mode dominates there)."""
+    tail = scipy.signal.detrend(x_m[-round(window_s / T):])
+    f, power = scipy.signal.periodogram(tail, fs=1 / T, nfft=16384)
     return float(f[np.argmax(power)])
 
 
@@ -386,7 +389,6 @@ class SensorPlacement(Exercise):
         return Analysis(readouts, poles, notes=notes, plots=self._plots(values))
 
     def _plots(self, values: dict) -> list:
-        from . import Plot
         n = int(values["modes"])
         paths = pole_paths(values)
         colours = ("#1f77b4", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2")
@@ -429,6 +431,9 @@ class SensorPlacement(Exercise):
     def retune(self, simulation: LoopSimulation, values: dict) -> LoopSimulation:
         return self.simulation(values).carry_on_from(simulation)
 
+    def scene(self, values: dict) -> RotorScene:
+        return RotorScene(rotor(values["modal_damping_percent"] / 100), values, integrated)
+
     def metrics(self, values: dict, duration_s: float) -> dict:
         n = int(values["modes"])
         r = rotor(values["modal_damping_percent"] / 100)
@@ -442,8 +447,7 @@ class SensorPlacement(Exercise):
             trace = sim.advance(n_steps)
             x_b = trace[:, 1 + LOOP_OUTPUTS.index("x_bearing_m")]
             runs[name] = {"status": sim.status_message() or "ok",
-                          "oscillation_hz": oscillation_frequency_hz(x_b - np.mean(x_b)) if x_b.size > 64
-                          else float("nan"),
+                          "oscillation_hz": oscillation_frequency_hz(x_b) if x_b.size > 64 else float("nan"),
                           "peak_um": float(np.max(np.abs(x_b))) * 1e6 if x_b.size else float("nan")}
         current = mode_poles(loop(values), n)
         return {
