@@ -21,24 +21,24 @@ The paper gives no drawing with dimensions.  The geometry below is chosen
   coupling hub at the drive end; total 25.1 kg.  The ball bearing sits 40 mm
   from the drive end.
 * **Equivalent mass.**  The rigid mode's modal mass seen at the bearing plane
-  is 20.2 kg, close to the appendix's equivalent rotor mass m = 21.5 kg of
+  is 20.1 kg, close to the appendix's equivalent rotor mass m = 21.5 kg of
   eq. 3 (the paper's rigid one-axis model); the stack must sit near the
   shaft's end and carry most of the mass for that to hold, as it does here.
 * **Mode 3's node near the laminations.**  The stack's large diametral inertia
-  nearly pins the bending modes there: mode 2 has a node 12 mm inboard of the
-  bearing plane, mode 3 one 19 mm outboard, i.e. at the stack's outer face.
+  nearly pins the bending modes there: mode 2 has a node 13 mm inboard of the
+  bearing plane, mode 3 one 18 mm outboard, i.e. at the stack's outer face.
   An outboard sensor track therefore sees mode 3 with the opposite sign.
   Natural frequencies (rotor on its ball bearing, magnetic bearing off):
-  0, 109, 300, 708 Hz.
+  0, 109, 296, 710 Hz.
 * The shaft diameter sets the bending frequencies.  Ø 38 mm puts mode 3
-  (300 Hz) above the bearing's closed-loop mode (~250 Hz): there the PID's
+  (296 Hz) above the bearing's closed-loop mode (~250 Hz): there the PID's
   phase lead has run out, so the mode is lightly damped even with the
   integrated sensor, and the wrong sign of an external sensor tips it over.
 * Bending modes carry 0.5 % modal damping (not in the paper; typical of a
   steel shaft with a shrink-fitted stack).
 
 The laminations add mass and diametral inertia but no bending stiffness
-(thin insulated sheets); they are lumped onto the nodes under the stack.
+(thin insulated sheets); they are lumped onto the stack's end and centre nodes.
 Elements are Euler-Bernoulli beams with consistent mass matrices; the
 eigenproblem K phi = omega^2 M phi is solved by ``scipy.linalg.eigh``.
 """
@@ -117,8 +117,8 @@ class RotorGeometry:
 
     @property
     def stack_inertia_kg_m2(self) -> float:
-        """Diametral moment of inertia of the stack (thin annulus part; the length part
-        comes from spreading its mass over the nodes under it)."""
+        """Diametral moment of inertia of the stack about its centre, annulus part
+        m (D^2 + d^2) / 16; the length part m L^2 / 12 comes from its lumped masses."""
         return self.stack_mass_kg * (self.stack_diameter_m**2 + self.shaft_diameter_m**2) / 16
 
     @property
@@ -170,10 +170,12 @@ class FlexibleRotor:
         self.node_z_m = np.unique(np.round(z, 9))
         self.K, self.M = assemble_beam(self.node_z_m, STEEL_YOUNGS_PA * np.pi * g.shaft_diameter_m**4 / 64,
                                        STEEL_DENSITY_KG_M3 * np.pi / 4 * g.shaft_diameter_m**2)
+        # the stack as a rigid body on its end and centre nodes with Simpson's weights 1/6, 2/3, 1/6:
+        # they reproduce its mass and its length's share of inertia (m L^2 / 12) on any mesh
         low, high = g.stack_ends_m
-        under_stack = np.flatnonzero((self.node_z_m >= low - 1e-9) & (self.node_z_m <= high + 1e-9))
-        for node in under_stack:
-            self.add_lumped(node, g.stack_mass_kg / len(under_stack), g.stack_inertia_kg_m2 / len(under_stack))
+        for z, share in ((low, 1 / 6), (g.bearing_m, 2 / 3), (high, 1 / 6)):
+            self.add_lumped(self.node(z), share * g.stack_mass_kg, 0.0)
+        self.add_lumped(self.node(g.bearing_m), 0.0, g.stack_inertia_kg_m2)
         self.add_lumped(self.node(g.hub_position_m), g.hub_mass_kg, g.hub_mass_kg * g.hub_diameter_m**2 / 16)
         self.constrained_dofs = (2 * self.node(g.pivot_m),)
 
