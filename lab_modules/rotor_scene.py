@@ -7,8 +7,10 @@ be watched), with its nodes marked by red spheres.  The shaft is one tube
 mesh whose vertices are rewritten every frame; the stack moves as a rigid
 body with the shaft's displacement and slope at the bearing plane.
 
-Scene axes: x along the shaft (drive end left), z up = the bearing axis
-whose deflection is shown.
+Model axes: x along the shaft (drive end at negative x), z up = the bearing
+axis whose deflection is shown.  Everything hangs under one frame that turns
+the shaft 135° about z; every node is drawn ``VIEW_SCALE`` times life size, so the viewer's default camera (which
+looks at the origin along the space diagonal) sees the rotor side-on.
 """
 
 from __future__ import annotations
@@ -17,7 +19,9 @@ import numpy as np
 
 from .flexible_rotor import FlexibleRotor
 
-AMPLITUDE_M = 0.03              # drawn peak deflection of the shown mode
+AMPLITUDE_M = 0.05              # drawn peak deflection of the shown mode
+VIEW_SCALE = 4.0                # the rotor is drawn four times life size
+ROOT = "/rotor_view"
 SHOWN_FREQUENCY_HZ = 0.7        # the animation's (slowed) oscillation
 RING_SEGMENTS = 20
 SHAFT_STATIONS = 92
@@ -77,8 +81,13 @@ class RotorScene:
         self._shape()
 
     def _x(self, z_m):
-        """Scene x of an axial position (shaft centred on the origin)."""
+        """Model x [m] of an axial position (shaft centred on the origin)."""
         return np.asarray(z_m) - self.geometry.length_m / 2
+
+    @staticmethod
+    def _at(x_m, y_m, z_m) -> tuple[float, float, float]:
+        """Scene position of a model point [m] (drawn ``VIEW_SCALE`` times life size)."""
+        return (VIEW_SCALE * float(x_m), VIEW_SCALE * float(y_m), VIEW_SCALE * float(z_m))
 
     def _shape(self) -> None:
         mode = int(self.values["shown_mode"]) - 1
@@ -96,32 +105,38 @@ class RotorScene:
     def attach(self, scene) -> None:
         g, h = self.geometry, self.handles
         scene.set_up_direction("+z")
+        turn = 3 * np.pi / 4              # model x -> the camera's left-to-right
+        scene.add_frame(ROOT, show_axes=False, wxyz=(float(np.cos(turn / 2)), 0.0, 0.0, float(np.sin(turn / 2))))
         radius = g.shaft_diameter_m / 2
         self.rest, faces = shaft_mesh(self._x(self.stations_m), radius)
-        h["shaft"] = scene.add_mesh_simple("/rotor/shaft", self.rest, faces, color=STEEL)
+        h["shaft"] = scene.add_mesh_simple(f"{ROOT}/rotor/shaft", self.rest, faces, color=STEEL, scale=VIEW_SCALE)
         vertices, faces = tube(g.stack_length_m, radius, g.stack_diameter_m / 2, 48)
-        h["stack"] = scene.add_mesh_simple("/rotor/stack", vertices, faces, color=LAMINATION,
-                                           position=(float(self._x(g.bearing_m)), 0.0, 0.0))
+        h["stack"] = scene.add_mesh_simple(f"{ROOT}/rotor/stack", vertices, faces, color=LAMINATION, opacity=0.6,
+                                           scale=VIEW_SCALE,
+                                           position=self._at(self._x(g.bearing_m), 0.0, 0.0))
         vertices, faces = tube(g.stack_length_m + 0.03, g.stack_diameter_m / 2 + 0.012,
                                g.stack_diameter_m / 2 + 0.06, 48)
-        scene.add_mesh_simple("/stator", vertices, faces, color=STATOR, opacity=0.35,
-                              position=(float(self._x(g.bearing_m)), 0.0, 0.0))
+        scene.add_mesh_simple(f"{ROOT}/stator", vertices, faces, color=STATOR, opacity=0.35, scale=VIEW_SCALE,
+                              position=self._at(self._x(g.bearing_m), 0.0, 0.0))
         vertices, faces = tube(0.025, radius + 0.004, radius + 0.03)
-        scene.add_mesh_simple("/ball_bearing", vertices, faces, color=STATOR,
-                              position=(float(self._x(g.pivot_m)), 0.0, 0.0))
+        scene.add_mesh_simple(f"{ROOT}/ball_bearing", vertices, faces, color=STATOR, scale=VIEW_SCALE,
+                              position=self._at(self._x(g.pivot_m), 0.0, 0.0))
         vertices, faces = tube(0.03, 0.0, g.hub_diameter_m / 2)
-        h["hub"] = scene.add_mesh_simple("/rotor/hub", vertices, faces, color=STEEL,
-                                         position=(float(self._x(g.hub_position_m)), 0.0, 0.0))
+        h["hub"] = scene.add_mesh_simple(f"{ROOT}/rotor/hub", vertices, faces, color=STEEL, scale=VIEW_SCALE,
+                                         position=self._at(self._x(g.hub_position_m), 0.0, 0.0))
         vertices, faces = tube(0.012, radius + 0.006, radius + 0.022)
-        h["sensor"] = scene.add_mesh_simple("/sensor", vertices, faces, color=EDDY_CURRENT)
-        h["nodes"] = [scene.add_icosphere(f"/nodes/{k}", 0.009, NODE, position=(0.0, 0.0, 0.0), visible=False)
+        h["sensor"] = scene.add_mesh_simple(f"{ROOT}/sensor", vertices, faces, color=EDDY_CURRENT, scale=VIEW_SCALE)
+        # a node: a red sphere on the axis and a red post through it (visible inside the stack too)
+        h["nodes"] = [(scene.add_icosphere(f"{ROOT}/nodes/{k}/ball", VIEW_SCALE * 0.026, NODE),
+                       scene.add_box(f"{ROOT}/nodes/{k}/post", NODE, (0.004 * VIEW_SCALE, 0.004 * VIEW_SCALE,
+                                                                        0.36 * VIEW_SCALE)))
                       for k in range(6)]
-        scene.add_label("/labels/bearing", "magnetic bearing",
-                        position=(float(self._x(g.bearing_m)), 0.0, g.stack_diameter_m / 2 + 0.08))
-        scene.add_label("/labels/pivot", "ball bearing (pivot)",
-                        position=(float(self._x(g.pivot_m)), 0.0, 0.06))
-        h["sensor_label"] = scene.add_label("/labels/sensor", "sensor", position=(0.0, 0.0, -0.08))
-        h["mode_label"] = scene.add_label("/labels/mode", "", position=(float(self._x(0.0)), 0.0, 0.2))
+        scene.add_label(f"{ROOT}/labels/bearing", "magnetic bearing",
+                        position=self._at(self._x(g.bearing_m), 0.0, g.stack_diameter_m / 2 + 0.08))
+        scene.add_label(f"{ROOT}/labels/pivot", "ball bearing (pivot)",
+                        position=self._at(self._x(g.pivot_m), 0.0, 0.06))
+        h["sensor_label"] = scene.add_label(f"{ROOT}/labels/sensor", "sensor", position=(0.0, 0.0, 0.0))
+        h["mode_label"] = scene.add_label(f"{ROOT}/labels/mode", "", position=self._at(self._x(0.3), 0.0, 0.25))
         self.update(self.values)
 
     def update(self, values: dict) -> None:
@@ -133,18 +148,17 @@ class RotorScene:
         offset = values["sensor_offset_mm"]
         z_s = g.bearing_m + offset * 1e-3
         integrated = self.integrated(offset)
-        h["sensor"].position = (float(self._x(z_s)), 0.0, 0.0)
+        h["sensor"].position = self._at(self._x(z_s), 0.0, 0.0)
         h["sensor"].color = CAPACITIVE if integrated else EDDY_CURRENT
         kind = "integrated capacitive sensor" if integrated else "eddy-current sensor"
         h["sensor_label"].text = f"{kind} ({offset:+.0f} mm)"
-        h["sensor_label"].position = (float(self._x(z_s)), 0.0, -0.06 - 0.05 * integrated)
-        for k, handle in enumerate(h["nodes"]):
-            handle.visible = k < len(self.nodes_m)
-            if handle.visible:
-                handle.position = (float(self._x(self.nodes_m[k])), 0.0, 0.0)
+        h["sensor_label"].position = self._at(self._x(z_s), 0.0, -0.06 - 0.05 * integrated)
+        for k, (ball, post) in enumerate(h["nodes"]):
+            ball.visible = post.visible = k < len(self.nodes_m)
+            if ball.visible:
+                ball.position = post.position = self._at(self._x(self.nodes_m[k]), 0.0, 0.0)
         mode = int(values["shown_mode"])
-        h["mode_label"].text = (f"mode {mode}: {self.frequency_hz:.0f} Hz (shown slowed down and exaggerated; "
-                                "red: nodes)")
+        h["mode_label"].text = f"mode {mode}: {self.frequency_hz:.0f} Hz (slowed, exaggerated; red: nodes)"
 
     def animate(self, wall_time_s: float) -> None:
         h = self.handles
@@ -155,5 +169,5 @@ class RotorScene:
         vertices = self.rest.copy()
         vertices[:, 2] += deflection
         h["shaft"].vertices = vertices
-        h["stack"].position = (float(self._x(self.geometry.bearing_m)), 0.0, float(phase * self.bearing_shape))
+        h["stack"].position = self._at(self._x(self.geometry.bearing_m), 0.0, phase * self.bearing_shape)
         h["stack"].wxyz = _about_y(-float(np.arctan(phase * self.bearing_slope)))
