@@ -325,27 +325,27 @@ def closed_loop(plant: control.StateSpace, compensator: control.StateSpace,
 
     The plant is extended so that the reference and the sensors' noise enter
     as inputs: the compensator sees (y_position + noise, y_current + noise, r).
-    Inputs ``LOOP_INPUTS``; outputs ``LOOP_OUTPUTS`` (the sensor's reading and
-    the rotor at the bearing and at the sensor in metres, the coil current).
+    Inputs ``LOOP_INPUTS``; outputs ``LOOP_OUTPUTS`` (the sensor's noisy reading
+    and the rotor at the bearing and at the sensor in metres, the true coil current).
     """
     A, B, C = (np.asarray(M) for M in (plant.A, plant.B, plant.C))
     n = A.shape[0]
     k_mx, k_mi = rig.position_sensor_gain_v_per_m, rig.current_sensor_gain_v_per_a
-    # inputs (i_ref, f_z, r, noise_x, noise_i); outputs (y_pos, y_cur, r, x_b, x_s)
+    # inputs (i_ref, f_z, r, noise_x, noise_i); outputs (y_pos + noise_x, y_cur + noise_i, r, x_b, x_s, K_mi i)
     B_ext = np.hstack([B, np.zeros((n, 3))])
-    C_ext = np.vstack([C[0], C[3], np.zeros(n), C[1], C[2]])
-    D_ext = np.zeros((5, 5))
+    C_ext = np.vstack([C[0], C[3], np.zeros(n), C[1], C[2], C[3]])
+    D_ext = np.zeros((6, 5))
     D_ext[0, 3] = D_ext[1, 4] = D_ext[2, 2] = 1.0
     extended = control.ss(A, B_ext, C_ext, D_ext, plant.dt)
     # the compensator reads (y_pos, y_cur, r) and drives i_ref only
     nc = compensator.nstates
-    Cf, Df = np.zeros((5, nc)), np.zeros((5, 5))
+    Cf, Df = np.zeros((5, nc)), np.zeros((5, 6))
     Cf[0], Df[0, :3] = np.asarray(compensator.C)[0], np.asarray(compensator.D)[0]
-    feedback_path = control.ss(compensator.A, np.hstack([compensator.B, np.zeros((nc, 2))]), Cf, Df, plant.dt)
+    feedback_path = control.ss(compensator.A, np.hstack([compensator.B, np.zeros((nc, 3))]), Cf, Df, plant.dt)
     loop = control.feedback(extended, feedback_path, sign=1)
-    # outputs in physical units: reading [m], x_b [m], x_s [m], i [A]
-    scale = np.zeros((4, 5))
-    scale[0, 0], scale[1, 3], scale[2, 4], scale[3, 1] = 1 / k_mx, 1.0, 1.0, 1 / k_mi
+    # outputs in physical units: reading [m], x_b [m], x_s [m], true coil current i [A]
+    scale = np.zeros((4, 6))
+    scale[0, 0], scale[1, 3], scale[2, 4], scale[3, 5] = 1 / k_mx, 1.0, 1.0, 1 / k_mi
     inputs = np.zeros((5, 4))
     inputs[2, 0], inputs[1, 1], inputs[3, 2], inputs[4, 3] = 1.0, 1.0, 1.0, 1.0
     return control.ss(loop.A, loop.B @ inputs, scale @ loop.C, scale @ loop.D @ inputs, plant.dt,

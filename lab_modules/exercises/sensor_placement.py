@@ -431,6 +431,13 @@ class SensorPlacement(Exercise):
     def retune(self, simulation: LoopSimulation, values: dict) -> LoopSimulation:
         return self.simulation(values).carry_on_from(simulation)
 
+    def live_readouts(self, trace: dict[str, np.ndarray]) -> list[tuple[str, float, str]]:
+        def rms(x):
+            return float(np.sqrt(np.mean((x - np.mean(x)) ** 2)))
+        return [("RMS rotor motion at the bearing", rms(trace["x_bearing_m"]) * 1e6, "µm"),
+                ("RMS sensor reading", rms(trace["sensor_reading_m"]) * 1e6, "µm"),
+                ("RMS coil current", rms(trace["current_a"]), "A")]
+
     def scene(self, values: dict) -> RotorScene:
         return RotorScene(rotor(values["modal_damping_percent"] / 100), values, integrated)
 
@@ -449,6 +456,13 @@ class SensorPlacement(Exercise):
             runs[name] = {"status": sim.status_message() or "ok",
                           "oscillation_hz": oscillation_frequency_hz(x_b) if x_b.size > 64 else float("nan"),
                           "peak_um": float(np.max(np.abs(x_b))) * 1e6 if x_b.size else float("nan")}
+        noise = {}
+        for source in ("measured", "estimated"):
+            quiet = {**values, "sensor_offset_mm": 0.0, "gain_factor": 1.0, "feedback": source,
+                     "reference_step_um": 0.0}
+            trace = self.simulation(quiet).advance(n_steps)[n_steps // 4:]
+            noise[source] = {column: float(np.std(trace[:, 1 + LOOP_OUTPUTS.index(column)])) if len(trace)
+                             else float("nan") for column in ("x_bearing_m", "current_a")}
         current = mode_poles(loop(values), n)
         return {
             "natural_frequencies_hz": r.natural_frequencies_hz(n).tolist(),
@@ -468,6 +482,14 @@ class SensorPlacement(Exercise):
             "status_external": runs["external"]["status"],
             "status_collocated": runs["collocated"]["status"],
             "peak_bearing_displacement_collocated_um": runs["collocated"]["peak_um"],
+            "rms_displacement_collocated_measured_feedback_um": noise["measured"]["x_bearing_m"] * 1e6,
+            "rms_displacement_collocated_estimated_feedback_um": noise["estimated"]["x_bearing_m"] * 1e6,
+            "rms_current_collocated_measured_feedback_a": noise["measured"]["current_a"],
+            "rms_current_collocated_estimated_feedback_a": noise["estimated"]["current_a"],
+            "max_gain_factor_collocated_estimated_feedback":
+                largest_stable_gain({**values, "feedback": "estimated"}, 0.0)[0],
+            "max_gain_factor_external_estimated_feedback":
+                largest_stable_gain({**values, "feedback": "estimated"}, EXTERNAL_OFFSET_MM)[0],
             "sensor_offset_mm": values["sensor_offset_mm"],
             "mode_damping_current": damping(current).tolist(),
             "largest_stable_gain_factor_current": largest_stable_gain(values)[0],
