@@ -187,7 +187,7 @@ def loop(values: dict, gain_factor: float | None = None, sensor_offset_mm: float
 
 # -- linear analysis ---------------------------------------------------------------------
 def continuous_poles(system: control.StateSpace) -> np.ndarray:
-    return analysis.z_to_s(np.linalg.eigvals(np.asarray(system.A)), T)
+    return analysis.z_to_s(system.poles(), T)
 
 
 def mode_poles(system: control.StateSpace, n_modes: int) -> np.ndarray:
@@ -217,8 +217,16 @@ def damping(poles_s: np.ndarray) -> np.ndarray:
     return -poles_s.real / np.maximum(np.abs(poles_s), 1e-12)
 
 
+def unstable_mode_sentence(modes_s: np.ndarray) -> str:
+    """'mode j grows at f Hz' for the most unstable mode (or: diverges without oscillating)."""
+    j = int(np.argmax(modes_s.real))
+    if abs(modes_s[j].imag) < 2 * np.pi:
+        return f"mode {j + 1} diverges without oscillating (too little stiffness against k_x)"
+    return f"mode {j + 1} grows at {abs(modes_s[j].imag) / (2 * np.pi):.0f} Hz"
+
+
 def stable(system: control.StateSpace) -> bool:
-    return bool(np.max(np.abs(np.linalg.eigvals(np.asarray(system.A)))) < 1.0)
+    return bool(np.max(np.abs(system.poles())) < 1.0)
 
 
 def largest_stable_gain(values: dict, sensor_offset_mm: float | None = None) -> tuple[float, int | None]:
@@ -379,9 +387,7 @@ class SensorPlacement(Exercise):
                  ("Natural frequencies: the rotor on its ball bearing with the magnetic bearing switched off "
                   "(mode 1 is the rigid tilting about the ball bearing).")]
         if not stable(closed):
-            worst = modes_s[np.argmax(modes_s.real)]
-            notes.insert(0, f"Unstable: mode {int(np.argmax(modes_s.real)) + 1} grows at "
-                            f"{abs(worst.imag) / (2 * np.pi):.0f} Hz.")
+            notes.insert(0, f"Unstable: {unstable_mode_sentence(modes_s)}.")
         poles = {"open-loop plant": np.linalg.eigvals(np.asarray(
                      modal_plant(r, GEOMETRY.bearing_m + values["sensor_offset_mm"] * 1e-3, n,
                                  values["sensor_lag_us"] * 1e-6).A)),
@@ -421,9 +427,8 @@ class SensorPlacement(Exercise):
             modes_s = mode_poles(closed, int(values["modes"]))
             if stable(closed):
                 return "The linear loop is stable: the reference step or the noise was too large."
-            j = int(np.argmax(modes_s.real))
-            return (f"The loop is unstable: mode {j + 1} grows at {abs(modes_s[j].imag) / (2 * np.pi):.0f} Hz. "
-                    "Move the sensor or lower the gain, then reset.")
+            return (f"The loop is unstable: {unstable_mode_sentence(modes_s)}. "
+                    "Move the sensor or change the gain, then reset.")
         return LoopSimulation(closed, simulation_inputs(values), values["disturbance_force_n"],
                               (K_MX * sensor_noise_m(values), K_MI * CURRENT_NOISE_A),
                               seed=int(values["seed"]), explain=explain)
