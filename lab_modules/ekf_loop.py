@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import control
 import numba
 import numpy as np
+from scipy.signal import max_len_seq
 
 from . import extended_filters as ef
 from .amb_axis import RIG, BearingAxis
@@ -128,6 +129,72 @@ def run(n_steps, model, plant, plant_physics, x_hat, P, Q, R_diag, C, filter_phy
 
 def _zero(t: np.ndarray) -> np.ndarray:
     return np.zeros_like(t)
+
+
+_PRBS_BITS = 2.0 * max_len_seq(9)[0] - 1.0
+
+
+# -- inputs: sample times [s] -> reference position [m] or force [N] ----------
+@dataclass(frozen=True)
+class Prbs:
+    """Offset plus a pseudo-random binary sequence of ±amplitude (§III-A: the
+    excitation superimposed on the reference).  A maximum-length sequence of
+    9 bits (511 bits, ``scipy.signal.max_len_seq``), each held ``bit_time_s``.
+    The offset ramps in over ``offset_ramp_s`` so that it does not kick the loop."""
+
+    amplitude: float
+    bit_time_s: float
+    offset: float = 0.0
+    offset_ramp_s: float = 0.05
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        bits = _PRBS_BITS[(t // self.bit_time_s).astype(int) % _PRBS_BITS.size]
+        return Ramp(self.offset, self.offset_ramp_s)(t) + self.amplitude * bits
+
+
+@dataclass(frozen=True)
+class Step:
+    """0 before ``time_s``, ``amplitude`` from then on."""
+
+    amplitude: float
+    time_s: float
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        return np.where(t >= self.time_s, self.amplitude, 0.0)
+
+
+@dataclass(frozen=True)
+class SquareWave:
+    """Period ``period_s``: first half 0, second half ``amplitude``."""
+
+    amplitude: float
+    period_s: float
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        return np.where(np.mod(t, self.period_s) >= 0.5 * self.period_s, self.amplitude, 0.0)
+
+
+@dataclass(frozen=True)
+class Ramp:
+    """From 0 linearly to ``amplitude`` over ``ramp_s``, then constant (a static load)."""
+
+    amplitude: float
+    ramp_s: float
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        return self.amplitude * np.clip(t / self.ramp_s, 0.0, 1.0)
+
+
+@dataclass(frozen=True)
+class Sine:
+    """0 until ``start_s``, then amplitude sin(2 pi (t - start_s) / period_s)."""
+
+    amplitude: float
+    period_s: float
+    start_s: float = 0.0
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        return self.amplitude * np.sin(2 * np.pi * np.maximum(t - self.start_s, 0.0) / self.period_s)
 
 
 @dataclass(frozen=True)
