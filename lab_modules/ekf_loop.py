@@ -20,7 +20,7 @@ The plant is always the nonlinear one of eq. 10-12; the filter is either
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import control
 import numba
@@ -127,7 +127,8 @@ def run(n_steps, model, plant, plant_physics, x_hat, P, Q, R_diag, C, filter_phy
     return OK, n_steps
 
 
-def _zero(t: np.ndarray) -> np.ndarray:
+def no_input(t: np.ndarray) -> np.ndarray:
+    """Zero at every sample time."""
     return np.zeros_like(t)
 
 
@@ -204,7 +205,8 @@ class EKFLoopSetup:
     Noise standard deviations are per sample (T = 50 µs); the plant's process
     noise enters v (as the force ``process_force_n``) and i.  ``reference`` and
     ``disturbance`` map sample times [s] to the reference position [m] and the
-    disturbance force f_z [N].
+    disturbance force f_z [N], counted from ``input_start_s``; ``experiment``
+    names that input programme (a retune to another one restarts it).
     """
 
     model: int                                   # ef.LINEARISED (§III-A) or ef.NONLINEAR (§III-B)
@@ -221,8 +223,10 @@ class EKFLoopSetup:
     current_noise_a: float = 1.87
     process_force_n: float = 0.5
     process_current_a: float = 1e-3
-    reference: Callable[[np.ndarray], np.ndarray] = _zero
-    disturbance: Callable[[np.ndarray], np.ndarray] = _zero
+    reference: Callable[[np.ndarray], np.ndarray] = no_input
+    disturbance: Callable[[np.ndarray], np.ndarray] = no_input
+    experiment: str = ""
+    input_start_s: float = 0.0
     rig: BearingAxis = RIG
 
     @property
@@ -264,6 +268,22 @@ class EKFLoopSimulation:
         self.step = 0
         self.status = OK
 
+    def retuned(self, setup: EKFLoopSetup) -> EKFLoopSimulation:
+        """A simulation with new settings that carries on from this one's state
+        (rotor, filter, PID, time, noise stream), so a slider move changes the
+        running experiment; a new filter starting point restarts the filter only,
+        a new input programme (``experiment``) starts its inputs now."""
+        old = self.setup
+        start = old.input_start_s if setup.experiment == old.experiment else self.time_s
+        new = EKFLoopSimulation(replace(setup, input_start_s=start))
+        new.rng, new.step, new.status, new.plant[:] = self.rng, self.step, self.status, self.plant
+        if (np.array_equal(setup.filter_x0, old.filter_x0)
+                and np.array_equal(setup.filter_P0, old.filter_P0)):
+            new.x_hat[:], new.P[:] = self.x_hat, self.P
+        if new.ctrl.shape == self.ctrl.shape:
+            new.ctrl[:] = self.ctrl
+        return new
+
     @property
     def time_s(self) -> float:
         return self.step * self.sample_time_s
@@ -274,8 +294,8 @@ class EKFLoopSimulation:
             return np.empty((0, len(TRACE_COLUMNS) + 1))
         setup = self.setup
         t = (self.step + np.arange(n_steps)) * self.sample_time_s
-        reference = np.ascontiguousarray(setup.reference(t), dtype=float)
-        disturbance = np.ascontiguousarray(setup.disturbance(t), dtype=float)
+        reference = np.ascontiguousarray(setup.reference(t - setup.input_start_s), dtype=float)
+        disturbance = np.ascontiguousarray(setup.disturbance(t - setup.input_start_s), dtype=float)
         noise = self.rng.standard_normal((n_steps, 4))
         trace = np.empty((n_steps, len(TRACE_COLUMNS)))
         status, done = run(n_steps, setup.model, self.plant, self._plant_physics, self.x_hat, self.P,

@@ -145,3 +145,20 @@ def test_cli_rejects_bad_values_with_one_line():
     assert out.returncode == 2
     assert "prbs_amplitude_um" in out.stderr and "0 ... 30 µm" in out.stderr
     assert len(out.stderr.strip().splitlines()) == 1
+
+
+def test_retune_carries_on_and_restarts_a_new_experiments_inputs_now():
+    values = DISTURBANCE.resolve()
+    sim = DISTURBANCE.simulation(values)
+    sim.advance(2000)
+    x_hat = sim.x_hat.copy()
+    faster = DISTURBANCE.retune(sim, {**values, "filter_q_force": 10.0})
+    assert faster.time_s == sim.time_s and np.array_equal(faster.x_hat, x_hat)
+    sweep = DISTURBANCE.retune(faster, {**values, "experiment": "gap_sweep"})
+    trace = sweep.advance(10)
+    assert trace[0, 0] == pytest.approx(sim.time_s)
+    assert column(trace, "reference_m")[0] == 0.0            # the sweep starts from the centre
+    assert column(trace, "force_true_n")[-1] < 0.01 * values["sweep_load_n"]   # the load ramps in
+    restarted = PARAMETERS.retune(PARAMETERS.simulation(PARAMETERS.resolve()),
+                                  PARAMETERS.resolve({"initial_ki_n_per_a": 150.0}))
+    assert restarted.x_hat[3] == 150.0

@@ -46,7 +46,7 @@ from .. import analysis
 from .. import extended_filters as ef
 from ..amb_axis import DEFAULT_SENSOR_LAG_S, RIG
 from ..controllers import pid
-from ..ekf_loop import EKFLoopSetup, EKFLoopSimulation, Ramp, Sine, SquareWave, Step, column
+from ..ekf_loop import EKFLoopSetup, EKFLoopSimulation, Ramp, Sine, SquareWave, Step, column, no_input
 from ..parameters import Parameter
 from . import Analysis, Chart, Exercise, Plot, Series
 from .kalman_noise import PARAMETERS as NOISE_EXERCISE_PARAMETERS
@@ -108,14 +108,13 @@ def setup(values: dict, experiment: str | None = None, step_n: float | None = No
     overrides the choice; "step" is the metrics' one-shot step of ``step_n``."""
     experiment = experiment or values["experiment"]
     step_n = values["disturbance_step_n"] if step_n is None else step_n
-    reference, disturbance = (lambda t: np.zeros_like(t)), None
-    if experiment == "force_step":
-        disturbance = SquareWave(step_n, values["step_period_ms"] * 1e-3)
-    elif experiment == "step":
-        disturbance = Step(step_n, STEP_TIME_S)
-    else:
-        disturbance = Ramp(values["sweep_load_n"], LOAD_RAMP_S)
+    if experiment == "gap_sweep":
         reference = Sine(values["sweep_amplitude_um"] * 1e-6, values["sweep_period_ms"] * 1e-3, SWEEP_START_S)
+        disturbance = Ramp(values["sweep_load_n"], LOAD_RAMP_S)
+    elif experiment == "step":
+        reference, disturbance = no_input, Step(step_n, STEP_TIME_S)
+    else:
+        reference, disturbance = no_input, SquareWave(step_n, values["step_period_ms"] * 1e-3)
     return EKFLoopSetup(
         model=ef.NONLINEAR,
         controller=pid(values["pid_gain"], values["integral_time_ms"] * 1e-3,
@@ -130,7 +129,7 @@ def setup(values: dict, experiment: str | None = None, step_n: float | None = No
         use_estimate=values["feedback"] == "estimated", feedforward=values["feedforward"] == "on",
         sensor_noise_m=values["sensor_noise_um"] * 1e-6, current_noise_a=values["current_noise_a"],
         process_force_n=values["disturbance_force_n"],
-        reference=reference, disturbance=disturbance)
+        reference=reference, disturbance=disturbance, experiment=experiment)
 
 
 def _run(axis: EKFLoopSetup, seed: int, duration_s: float) -> tuple[np.ndarray, str]:
@@ -268,6 +267,10 @@ class EkfDisturbance(Exercise):
 
     def simulation(self, values: dict) -> EKFLoopSimulation:
         return EKFLoopSimulation(setup(values), seed=int(values["seed"]))
+
+    def retune(self, simulation: EKFLoopSimulation, values: dict) -> EKFLoopSimulation:
+        """A slider move changes the running experiment; a new experiment starts its inputs now."""
+        return simulation.retuned(setup(values))
 
     def metrics(self, values: dict, duration_s: float) -> dict:
         step, sweep = force_step(values, duration_s), gap_sweep(values)

@@ -195,6 +195,10 @@ class EkfParameters(Exercise):
     def simulation(self, values: dict) -> EKFLoopSimulation:
         return EKFLoopSimulation(setup(values), seed=int(values["seed"]))
 
+    def retune(self, simulation: EKFLoopSimulation, values: dict) -> EKFLoopSimulation:
+        """A slider move changes the running experiment (switch the PRBS on and watch)."""
+        return simulation.retuned(setup(values))
+
     def metrics(self, values: dict, duration_s: float) -> dict:
         n_steps = round(duration_s / T)
         out = {}
