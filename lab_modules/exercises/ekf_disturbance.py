@@ -39,14 +39,25 @@ Choices not in the paper (worksheet "Choices"):
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import control
 import numpy as np
 
 from .. import analysis
 from .. import extended_filters as ef
 from ..amb_axis import DEFAULT_SENSOR_LAG_S, RIG
-from ..controllers import pid
-from ..ekf_loop import EKFLoopSetup, EKFLoopSimulation, Ramp, Sine, SquareWave, Step, column, no_input
+from ..ekf_loop import (
+    EKFLoopSetup,
+    EKFLoopSimulation,
+    Ramp,
+    Sine,
+    SquareWave,
+    Step,
+    cached_pid,
+    column,
+    no_input,
+)
 from ..parameters import Parameter
 from . import Analysis, Chart, Exercise, Plot, Series
 from .kalman_noise import PARAMETERS as NOISE_EXERCISE_PARAMETERS
@@ -55,7 +66,8 @@ T = RIG.sample_time_s
 SETTLING_BAND = 0.05
 STEP_TIME_S = 0.05                  # the metrics' one-shot force step
 LOAD_RAMP_S, SWEEP_START_S = 0.05, 0.1
-PLOT_POINTS = 400
+PLOT_POINTS = 800
+FIG_4_WINDOW_S = (0.005, 0.06)        # shown before and after the step
 
 _shared = {p.name: p for p in NOISE_EXERCISE_PARAMETERS}
 P = Parameter
@@ -99,7 +111,8 @@ PARAMETERS = (
       description="Add -f_z_hat / (k_i K_a) to the amplifier reference (the disturbance feedforward "
                   "proposed after Fig. 4).", group="Controller"),
     _shared["pid_gain"], _shared["integral_time_ms"], _shared["derivative_time_ms"],
-    _shared["derivative_filter_us"], _shared["seed"], _shared["time_scale"],
+    _shared["derivative_filter_us"], _shared["seed"],
+    replace(_shared["time_scale"], default=0.1),   # a scope window of 0.5 s
 )
 
 
@@ -117,7 +130,7 @@ def setup(values: dict, experiment: str | None = None, step_n: float | None = No
         reference, disturbance = no_input, SquareWave(step_n, values["step_period_ms"] * 1e-3)
     return EKFLoopSetup(
         model=ef.NONLINEAR,
-        controller=pid(values["pid_gain"], values["integral_time_ms"] * 1e-3,
+        controller=cached_pid(values["pid_gain"], values["integral_time_ms"] * 1e-3,
                        values["derivative_time_ms"] * 1e-3, values["derivative_filter_us"] * 1e-6, T),
         filter_x0=np.zeros(ef.N_STATES),
         filter_P0=np.diag([10e-6, 1e-3, 0.1, 10e-6, 100.0]) ** 2,
@@ -154,6 +167,7 @@ def force_step(values: dict, duration_s: float = 0.25) -> dict:
     before = t < STEP_TIME_S
     x = column(with_step, "x_true_m")[:n]
     return {"settling_ms": settling_ms, "t": t, "response": response, "status": status or "ok",
+            "estimate": column(with_step, "force_estimated_n")[:n],
             "noise_n": float(np.std(column(without, "force_estimated_n")[:n][before & (t > 0.02)])),
             "final_error_percent": float(100 * (np.mean(response[-200:]) / step_n - 1)) if step_n else 0.0,
             "peak_displacement_um": float(1e6 * np.max(np.abs(x[after]))) if after.any() else float("nan")}
@@ -165,7 +179,7 @@ def gap_sweep(values: dict) -> dict:
     duration = SWEEP_START_S + values["sweep_period_ms"] * 1e-3
     trace, status = _run(setup(values, "gap_sweep"), int(values["seed"]), duration)
     keep = trace[:, 0] >= SWEEP_START_S
-    out = {"status": status or "ok", "x_um": 1e6 * column(trace, "x_true_m")[keep]}
+    out = {"status": status or "ok", "t": trace[keep, 0], "x_um": 1e6 * column(trace, "x_true_m")[keep]}
     for name, unit in (("kx", "n_per_m"), ("ki", "n_per_a")):
         phi, true = column(trace, f"{name}_estimated_{unit}")[keep], column(trace, f"{name}_true_{unit}")[keep]
         error = 100.0 * (phi / true - 1.0)
@@ -189,11 +203,43 @@ def filter_poles(values: dict) -> np.ndarray:
     return analysis.z_to_s(np.linalg.eigvals(Phi - L @ G), T)
 
 
-def _sampled(x: np.ndarray, *ys: np.ndarray) -> tuple[np.ndarray, ...]:
-    """At most ``PLOT_POINTS`` samples, sorted by x (a plot's shared increasing axis)."""
-    pick = np.linspace(0, x.size - 1, min(PLOT_POINTS, x.size)).astype(int)
-    order = np.argsort(x[pick])
-    return tuple(a[pick][order] for a in (x, *ys))
+def fig_4_plot(values: dict, step: dict) -> Plot:
+    """Fig. 4: the force estimate (noise included) around the step for q_55 / 100,
+    q_55 and 100 q_55, all on the same noise."""
+    q55, seed = values["filter_q_force"], int(values["seed"])
+    t = step["t"]
+    window = (t >= STEP_TIME_S - FIG_4_WINDOW_S[0]) & (t < STEP_TIME_S + FIG_4_WINDOW_S[1])
+    duration = STEP_TIME_S + FIG_4_WINDOW_S[1]
+    series = [("true step", np.where(t[window] >= STEP_TIME_S, values["disturbance_step_n"], 0.0), "#1f77b4")]
+    for factor, color in ((0.01, "#9467bd"), (1.0, "#d62728"), (100.0, "#ff7f0e")):
+        if factor == 1.0:
+            estimate = step["estimate"]
+        else:
+            trace, _ = _run(setup({**values, "filter_q_force": q55 * factor}, "step"), seed, duration)
+            estimate = np.full(t.size, np.nan)
+            estimate[:len(trace)] = column(trace, "force_estimated_n")[:t.size]
+        series.append((f"estimate, q_55 = {q55 * factor:.3g} N²", estimate[window], color))
+    return Plot(f"Force estimate after a {values['disturbance_step_n']:g} N step (Fig. 4)",
+                "time after the step [ms]", "f_z estimate [N]", 1e3 * (t[window] - STEP_TIME_S), tuple(series))
+
+
+def fig_5_plots(values: dict, sweep: dict) -> list[Plot]:
+    """Fig. 5: rotor position, and k_x, k_i from Phi (eq. 18) against eq. 10's derivatives, over time."""
+    if not sweep["x_um"].size:
+        return []
+    pick = np.linspace(0, sweep["x_um"].size - 1, min(PLOT_POINTS, sweep["x_um"].size)).astype(int)
+    t_ms = 1e3 * sweep["t"][pick]
+    load = f"{values['sweep_load_n']:g} N static load"
+    return [
+        Plot(f"Rotor moved across the gap, {load} (Fig. 5, top)", "time [ms]", "rotor position x [µm]", t_ms,
+             (("true position", sweep["x_um"][pick], "#1f77b4"),)),
+        Plot("Force-position factor (Fig. 5, middle)", "time [ms]", "k_x [N/µm]", t_ms,
+             (("analytic, eq. 10 at the true (x, i)", sweep["kx"][1][pick] * 1e-6, "#1f77b4"),
+              ("from Φ, eq. 18", sweep["kx"][0][pick] * 1e-6, "#d62728"))),
+        Plot("Force-current factor (Fig. 5, bottom)", "time [ms]", "k_i [N/A]", t_ms,
+             (("analytic, eq. 10 at the true (x, i)", sweep["ki"][1][pick], "#1f77b4"),
+              ("from Φ, eq. 18", sweep["ki"][0][pick], "#d62728"))),
+    ]
 
 
 class EkfDisturbance(Exercise):
@@ -241,29 +287,12 @@ class EkfDisturbance(Exercise):
             ("k_x from Φ: max error over the sweep", sweep["kx_max_error_percent"], "%"),
             ("k_i from Φ: max error over the sweep", sweep["ki_max_error_percent"], "%"),
         ]
-        window = step["t"] >= STEP_TIME_S - 0.01
-        plots = [Plot(f"Force estimate after a {values['disturbance_step_n']:g} N step (Fig. 4)",
-                      "time after the step [ms]", "f_z estimate [N]",
-                      1e3 * (step["t"][window] - STEP_TIME_S),
-                      (("estimate (response to the step)", step["response"][window], "#d62728"),
-                       ("true step", np.where(step["t"][window] >= STEP_TIME_S,
-                                              values["disturbance_step_n"], 0.0), "#1f77b4")))]
-        if sweep["x_um"].size:
-            x, kx_phi, kx_true = _sampled(sweep["x_um"], *sweep["kx"])
-            _, ki_phi, ki_true = _sampled(sweep["x_um"], *sweep["ki"])
-            plots += [
-                Plot(f"k_x across the gap, {values['sweep_load_n']:g} N load (Fig. 5)", "rotor position x [µm]",
-                     "k_x [N/µm]", x, (("from Φ, eq. 18", kx_phi * 1e-6, "#d62728"),
-                                        ("analytic, eq. 10", kx_true * 1e-6, "#1f77b4")), points=True),
-                Plot(f"k_i across the gap, {values['sweep_load_n']:g} N load (Fig. 5)", "rotor position x [µm]",
-                     "k_i [N/A]", x, (("from Φ, eq. 18", ki_phi, "#d62728"),
-                                       ("analytic, eq. 10", ki_true, "#1f77b4")), points=True)]
         notes = [f"Force step: {step['status']}", f"Gap sweep: {sweep['status']}",
                  ("Eq. 18 returns exactly the derivatives of eq. 10 at the filter's estimate (x_hat, i_hat); "
-                 "its error against the truth is the estimate's error, mostly that of i_hat.")]
+                  "its error against the truth is the estimate's error, mostly that of i_hat.")]
         poles = {"open-loop plant": np.linalg.eigvals(np.asarray(RIG.continuous_model(DEFAULT_SENSOR_LAG_S).A)),
                  "filter error (at x = 0)": filter_poles(values)}
-        return Analysis(readouts, poles, notes, plots)
+        return Analysis(readouts, poles, notes, [fig_4_plot(values, step), *fig_5_plots(values, sweep)])
 
     def simulation(self, values: dict) -> EKFLoopSimulation:
         return EKFLoopSimulation(setup(values), seed=int(values["seed"]))

@@ -30,12 +30,13 @@ Choices not in the paper (worksheet "Choices"):
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from .. import extended_filters as ef
 from ..amb_axis import RIG
-from ..controllers import pid
-from ..ekf_loop import EKFLoopSetup, EKFLoopSimulation, Prbs, column
+from ..ekf_loop import EKFLoopSetup, EKFLoopSimulation, Prbs, cached_pid, column
 from ..parameters import Parameter
 from . import Analysis, Chart, Exercise, Plot, Series
 from .kalman_noise import PARAMETERS as NOISE_EXERCISE_PARAMETERS
@@ -85,7 +86,8 @@ PARAMETERS = (
     P("feedback", "Feedback source", "", "measured", choices=("measured", "estimated"),
       description="Position the PID acts on: the sensor's or the filter's estimate.", group="Controller"),
     _shared["pid_gain"], _shared["integral_time_ms"], _shared["derivative_time_ms"],
-    _shared["derivative_filter_us"], _shared["seed"], _shared["time_scale"],
+    _shared["derivative_filter_us"], _shared["seed"],
+    replace(_shared["time_scale"], default=0.2),   # a scope window of 1 s
 )
 
 
@@ -96,7 +98,7 @@ def setup(values: dict, excitation: bool = True) -> EKFLoopSetup:
     amplitude = values["prbs_amplitude_um"] * 1e-6 if excitation else 0.0
     return EKFLoopSetup(
         model=ef.LINEARISED,
-        controller=pid(values["pid_gain"], values["integral_time_ms"] * 1e-3,
+        controller=cached_pid(values["pid_gain"], values["integral_time_ms"] * 1e-3,
                        values["derivative_time_ms"] * 1e-3, values["derivative_filter_us"] * 1e-6, T),
         filter_x0=initial, filter_P0=np.diag(sigma0**2),
         filter_Q=np.diag([0.0, values["filter_q_velocity"], values["filter_q_current"],
