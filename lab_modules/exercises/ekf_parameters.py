@@ -21,7 +21,8 @@ Choices not in the paper (worksheet "Choices"):
   paper's eq. 17 value 0.43 A² was tuned on the real amplifier, whose model
   error the simulated plant does not have (see ``ekf_disturbance``).
 * PRBS 8 µm, 10 ms bits: the PID's derivative turns every reference step into
-  a current kick (about 1.7 A per 5 µm); much larger steps drive the current
+  a current kick (peak about 0.5 A per µm of amplitude: 3.9 A at 8 µm, beyond
+  i0 = 3.1 A); much larger steps drive the current
   where eq. 10 is far from linear and bias the linear model's k_x (try 12 µm,
   5 ms), much smaller ones drown in the 1.87 A current-sensor noise.
 * An ideal position sensor by default (T_mx = 0): eq. 9 has no sensor lag, so
