@@ -2,12 +2,11 @@
 command-line contract."""
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 
+from app.cli import main
 from lab_modules.ekf_loop import TOUCHDOWN, EKFLoopSimulation, column
 from lab_modules.exercises import ekf_disturbance, ekf_parameters
 from lab_modules.parameters import ParameterError
@@ -129,22 +128,20 @@ def test_bad_values_are_one_line_errors(overrides):
 
 @pytest.mark.parametrize("name, metric", [("ekf_disturbance", "disturbance_estimate_settling_ms"),
                                           ("ekf_parameters", "ki_estimate_error_percent_no_excitation")])
-def test_cli_run_json_contract(name, metric):
-    out = subprocess.run([sys.executable, "-m", "app", "run", name, "--duration", "0.3", "--json"],
-                         capture_output=True, text=True, check=True)
-    result = json.loads(out.stdout)
+def test_cli_run_json_contract(name, metric, capsys):
+    assert main(["run", name, "--duration", "0.3", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
     assert set(result) == {"exercise", "parameters", "model", "metrics"}
     assert result["exercise"] == name
     assert metric in result["metrics"]
     assert len(result["model"]["states"]) == 5
 
 
-def test_cli_rejects_bad_values_with_one_line():
-    out = subprocess.run([sys.executable, "-m", "app", "run", "ekf_parameters", "--set",
-                          "prbs_amplitude_um=99", "--json"], check=False, capture_output=True, text=True)
-    assert out.returncode == 2
-    assert "prbs_amplitude_um" in out.stderr and "0 ... 30 µm" in out.stderr
-    assert len(out.stderr.strip().splitlines()) == 1
+def test_cli_rejects_bad_values_with_one_line(capsys):
+    assert main(["run", "ekf_parameters", "--set", "prbs_amplitude_um=99", "--json"]) == 2
+    error = capsys.readouterr().err
+    assert "prbs_amplitude_um" in error and "0 ... 30 µm" in error
+    assert len(error.strip().splitlines()) == 1
 
 
 def test_retune_carries_on_and_restarts_a_new_experiments_inputs_now():
