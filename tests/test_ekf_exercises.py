@@ -88,6 +88,8 @@ def test_scope_trace_has_the_declared_columns_and_bands():
             for series in chart.series:
                 assert series.column in sim.columns
         assert sim.status_message() == ""
+        readouts = exercise.live_readouts({name: trace[:, 1 + i] for i, name in enumerate(sim.columns)})
+        assert readouts and all(np.isfinite(value) for _, value, _ in readouts)
 
 
 def test_unstable_settings_stop_with_a_message():
