@@ -92,6 +92,16 @@ def test_scope_trace_has_the_declared_columns_and_bands():
         assert readouts and all(np.isfinite(value) for _, value, _ in readouts)
 
 
+@pytest.mark.parametrize("exercise", [PARAMETERS, DISTURBANCE], ids=lambda e: e.name)
+def test_filter_covariance_stays_symmetric_positive_definite_in_the_loop(exercise):
+    sim = exercise.simulation(exercise.resolve())
+    sim.advance(20000)
+    assert sim.status_message() == ""
+    sigma = np.sqrt(np.diag(sim.P))
+    assert np.array_equal(sim.P, sim.P.T)
+    assert np.linalg.eigvalsh(sim.P / np.outer(sigma, sigma)).min() > 0
+
+
 def test_unstable_settings_stop_with_a_message():
     sim = EKFLoopSimulation(ekf_parameters.setup(PARAMETERS.resolve({"pid_gain": 0.05})), seed=0)
     sim.advance(20000)
