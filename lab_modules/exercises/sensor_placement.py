@@ -126,9 +126,8 @@ def rotor(modal_damping: float) -> FlexibleRotor:
     return FlexibleRotor(replace(GEOMETRY, modal_damping=modal_damping))
 
 
-@lru_cache(maxsize=64)
-def _pid(gain: float, integral_time_s: float, derivative_time_s: float, filter_s: float):
-    return pid(gain, integral_time_s, derivative_time_s, filter_s, T)
+#: The PID for given gains, remembered (its Tustin discretisation is slow next to the rest).
+cached_pid = lru_cache(maxsize=64)(pid)
 
 
 @lru_cache(maxsize=256)
@@ -165,8 +164,8 @@ def compensator(values: dict, gain_factor: float | None = None,
                 sensor_offset_mm: float | None = None) -> control.StateSpace:
     """PID (scaled by the gain factor) on the measurement or on the filter's estimate."""
     factor = values["gain_factor"] if gain_factor is None else gain_factor
-    controller = _pid(values["pid_gain"], values["integral_time_ms"] * 1e-3, values["derivative_time_ms"] * 1e-3,
-                      values["derivative_filter_us"] * 1e-6) * factor
+    controller = cached_pid(values["pid_gain"], values["integral_time_ms"] * 1e-3,
+                            values["derivative_time_ms"] * 1e-3, values["derivative_filter_us"] * 1e-6, T) * factor
     if values["feedback"] == "measured":
         return pid_compensator(controller)
     model, gain, _, _ = _filter(values["sensor_lag_us"] * 1e-6, sensor_noise_m(values, sensor_offset_mm),
@@ -200,7 +199,7 @@ def mode_poles(system: control.StateSpace, n_modes: int) -> np.ndarray:
     A = np.asarray(system.A)
     z, vectors = np.linalg.eig(A)
     s = analysis.z_to_s(z, T)
-    omega = 2 * np.pi * rotor(GEOMETRY.modal_damping).natural_frequencies_hz(n_modes)
+    omega = 2 * np.pi * rotor(GEOMETRY.modal_damping).natural_frequencies_hz(n_modes)   # damping-free
     energy = np.abs(vectors[:n_modes]) ** 2 * (omega[:, None] ** 2 + np.abs(s)[None, :] ** 2)
     share = energy / np.maximum(energy.sum(axis=0), 1e-300)
     share[:, np.abs(s.imag) < 1e-6] -= 2.0      # a real pole only when no oscillating one is left
@@ -278,7 +277,7 @@ def residue_signs(values: dict, sensor_offset_mm: float | None = None) -> np.nda
 
 
 @lru_cache(maxsize=32)
-def _pole_paths(key) -> tuple[np.ndarray, np.ndarray]:
+def _pole_paths(key) -> np.ndarray:
     """Mode poles (rows: offsets ``PATH_OFFSETS_MM``, columns: modes) over the offset range."""
     values = dict(key)
     return np.array([mode_poles(loop(values, None, float(d)), int(values["modes"])) for d in PATH_OFFSETS_MM])
