@@ -27,9 +27,10 @@ Values the paper leaves out (also in the worksheet):
 * **Default external position +60 mm**: half the stack (20 mm) plus room for
   the winding heads and the sensor head (40 mm).
 * **Sensor lag T_mx = 50 µs for both sensors** (eq. 12; one sample period,
-  3.2 kHz bandwidth).  It must be short: with T_mx = 200 µs even the
-  collocated loop goes unstable at +40 % gain (the bearing mode, ~260 Hz),
-  contradicting the paper's +75 %.
+  3.2 kHz bandwidth).  It must be short for the paper's result: with
+  T_mx = 200 µs the collocated loop already sits at its limit at the
+  nominal gains (factor 1.02: mode 3 at ~300 Hz gets the lag's negative
+  damping), and the paper's +75 % would be impossible.
 """
 
 from __future__ import annotations
