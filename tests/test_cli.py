@@ -28,7 +28,7 @@ def run_app(*argv, timeout=120):
     """``python -m app ARGV`` in a fresh interpreter at the repository root."""
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH")]))
-    return subprocess.run([sys.executable, "-m", "app", *argv], cwd=REPO, env=env,
+    return subprocess.run([sys.executable, "-m", "app", *argv], check=False, cwd=REPO, env=env,
                           capture_output=True, text=True, timeout=timeout)
 
 
@@ -168,6 +168,15 @@ def test_default_run_reduces_noise_driven_motion(default_run):
     assert default_run["oscillation_reduction_percent"] > 40.0
     assert default_run["rms_displacement_estimated_feedback_um"] < default_run[
         "rms_displacement_measured_feedback_um"]
+
+
+def test_default_run_reduces_what_the_rig_can_see_by_the_papers_80_percent(default_run):
+    """Paper §II, Fig. 3: the rig sees the rotor only through its control
+    variable and its coil current.  Both drop by about 80 % (the paper's
+    figure) when the estimate is fed back: the position signal the controller
+    acts on (measured vs estimated) and the coil current's noise."""
+    assert default_run["fed_back_position_reduction_percent"] >= 75.0
+    assert default_run["current_noise_reduction_percent"] >= 75.0
 
 
 def test_default_run_allows_higher_gains_with_the_filter(default_run):
