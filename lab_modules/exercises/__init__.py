@@ -137,6 +137,7 @@ class Exercise:
 #: Exercise modules, in the order the lab lists them (each defines ``EXERCISE``).
 MODULES = (
     "kalman_noise",
+    "lqg_vs_pid",
 )
 
 
