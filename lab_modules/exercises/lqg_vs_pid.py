@@ -170,12 +170,14 @@ def reference_step_figures(trace: np.ndarray, step_m: float) -> dict[str, float]
 
 
 def disturbance_step_figures(trace: np.ndarray, force_n: float) -> dict[str, float]:
-    """Largest deviation [m] from the (zero) reference, s_dyn = |Δf_z| / Δx_max [N/m]
-    and the peak coil current [A] after the step."""
+    """Largest deviation [m] from the (zero) reference, s_dyn = |Δf_z| / Δx_max [N/m],
+    the offset [m] left at the end of the window and the peak coil current [A] after the step."""
     after = trace[trace[:, 0] >= 0.0]
+    x = column(after, "x_true_m")
     complete = len(after) >= round(AFTER_STEP_S / T)
-    deviation = float(np.max(np.abs(column(after, "x_true_m")))) if complete else float("nan")
+    deviation = float(np.max(np.abs(x))) if complete else float("nan")
     return {"max_deviation_m": deviation, "dynamic_stiffness_n_per_m": abs(force_n) / deviation,
+            "final_offset_m": float(x[-1]) if complete else float("nan"),
             "peak_current_a": float(np.max(np.abs(column(after, "current_a"))))}
 
 
@@ -308,6 +310,7 @@ class LqgVsPid(Exercise):
                 (f"{name}: RMS control current, reference step", r["reference_rms_current_a"], "A"),
                 (f"{name}: largest deviation, disturbance step", r["disturbance_max_deviation_m"] * 1e6, "µm"),
                 (f"{name}: dynamic stiffness s_dyn", r["disturbance_dynamic_stiffness_n_per_m"] * 1e-6, "N/µm"),
+                (f"{name}: offset 150 ms after the disturbance step", r["disturbance_final_offset_m"] * 1e6, "µm"),
             ]
         readouts += [
             ("Dominant pole, LQG regulator (Re)", dominant_real_part(poles["LQG regulator"]), "rad/s"),
@@ -353,6 +356,7 @@ class LqgVsPid(Exercise):
             metrics.update({
                 f"dynamic_stiffness_{key}_n_per_um": r["disturbance_dynamic_stiffness_n_per_m"] * 1e-6,
                 f"max_deviation_{key}_um": r["disturbance_max_deviation_m"] * 1e6,
+                f"offset_after_disturbance_{key}_um": r["disturbance_final_offset_m"] * 1e6,
                 f"overshoot_{key}_percent": r["reference_overshoot_percent"],
                 f"settling_time_{key}_ms": r["reference_settling_time_s"] * 1e3,
                 f"peak_current_{key}_a": r["reference_peak_current_a"],
