@@ -200,21 +200,27 @@ def step_tests(loops: dict[str, AxisSetup], values: dict) -> dict[str, dict]:
 # -- poles (Fig. 7) --------------------------------------------------------------------
 
 def pole_sets(loops: dict[str, AxisSetup], lqg: StateFeedback) -> dict[str, np.ndarray]:
-    """Continuous-equivalent poles [rad/s]: the regulator A_aug - B_aug K on the
-    nominal model (Fig. 7's "LQG controlled system"), the steady-state filter's
-    error poles eig(A - A K_f C), and both whole loops."""
+    """Continuous-equivalent poles [rad/s], drawn in this order (later on top):
+    the open-loop plant, the PID loop, the regulator A_aug - B_aug K on the
+    nominal model (Fig. 7's "LQG controlled system") and the steady-state
+    filter's error poles eig(A - A K_f C).  With the integrator on the estimate
+    the LQG loop's poles are exactly the last two sets (separation principle)."""
     axis = loops["LQG"]
     A_aug, B_aug = integral_augmented_model(axis.rig)
     gain = np.array([*lqg.state_gain, -lqg.integral_gain_v_per_m_s])
     K_f, _ = axis.steady_state_filter
     A, C = np.asarray(axis.model.A), np.asarray(axis.model.C)
     return {
+        "open-loop plant": np.linalg.eigvals(np.asarray(RIG.continuous_model(axis.sensor_lag_s).A)),
+        "PID loop with filter": analysis.z_to_s(analysis.loop_poles(loops["PID"].loop()), T),
         "LQG regulator": analysis.z_to_s(np.linalg.eigvals(A_aug - B_aug @ gain[None]), T),
         "Kalman filter error": analysis.z_to_s(np.linalg.eigvals(A - A @ K_f @ C), T),
-        "LQG loop with filter": analysis.z_to_s(analysis.loop_poles(axis.loop()), T),
-        "PID loop with filter": analysis.z_to_s(analysis.loop_poles(loops["PID"].loop()), T),
-        "open-loop plant": np.linalg.eigvals(np.asarray(RIG.continuous_model(axis.sensor_lag_s).A)),
     }
+
+
+def lqg_loop_poles(loops: dict[str, AxisSetup]) -> np.ndarray:
+    """Poles [rad/s] of the whole LQG loop (plant, filter, regulator)."""
+    return analysis.z_to_s(analysis.loop_poles(loops["LQG"].loop()), T)
 
 
 def dominant_real_part(poles_s: np.ndarray) -> float:
@@ -316,6 +322,7 @@ class LqgVsPid(Exercise):
             ("Dominant pole, LQG regulator (Re)", dominant_real_part(poles["LQG regulator"]), "rad/s"),
             ("Dominant pole, Kalman filter (Re)", dominant_real_part(poles["Kalman filter error"]), "rad/s"),
             ("Ratio filter / regulator", dominant_pole_ratio(poles), "×"),
+            ("Dominant pole, whole LQG loop (Re)", dominant_real_part(lqg_loop_poles(loops)), "rad/s"),
             ("LQG gain K_x", lqg.state_gain[0], "V/m"),
             ("LQG gain K_v", lqg.state_gain[1], "V·s/m"),
             ("LQG gain K_i", lqg.state_gain[2], "V/A"),
@@ -374,6 +381,7 @@ class LqgVsPid(Exercise):
             "lqg_gain_in_use": [*in_use.state_gain, in_use.integral_gain_v_per_m_s],
             "lqr_gain_units": ["V/m", "V s/m", "V/A", "V/(m s)"],
             "lqg_regulator_poles_rad_per_s": kalman_noise.pairs(poles["LQG regulator"]),
+            "lqg_loop_poles_rad_per_s": kalman_noise.pairs(lqg_loop_poles(loops)),
             "filter_error_poles_rad_per_s": kalman_noise.pairs(poles["Kalman filter error"]),
             "status_noise_run": sim.status_message() or "ok",
             "duration_s": len(trace) * T,
