@@ -61,13 +61,13 @@ class StateFeedback:
     units): the state (x [m], v [m/s], i [A]) is in SI units as in eq. 3-4 and
     u = i_ref is the amplifier's input in volts (eq. 4, K_a = 5 A/V), so
     K = (K_x [V/m], K_v [V s/m], K_i [V/A]) and K_I [V/(m s)] acts on the
-    time integral of the position error in metres.  The paper's "s^-1" is the
-    unit of K_I relative to a metre of error per volt.  Why this reading:
+    time integral of the position error in metres.  The paper's "s^-1" for K_I
+    omits the V/m that it also omits for K_x.  Why this reading:
 
-    * the position gain then yields a stiffness K_a k_i K_x - k_x
-      = 5 * 128.6 * 9979 - 800310 N/m = 5.6 N/µm, next to the paper's dynamic
-      stiffness of 6.7 N/µm (an output in amperes would give 0.48 N/µm, a
-      state in sensor volts 2e4 times more: unstable);
+    * the state feedback then has the static stiffness
+      K_a k_i K_x / (1 + K_a K_i) - k_x = 3.9 N/µm, the order of the paper's
+      dynamic stiffness of 6.7 N/µm (an output in amperes would give
+      0.4 N/µm, a state in sensor volts 2e4 times more: unstable);
     * the closed loop's poles are well damped (-202 ± 216j, -335, -2700 rad/s)
       and the integral's corner K_I / K_x = 103 rad/s lies below them;
     * the four numbers are exactly the discrete LQR (eq. 19-21) of the
@@ -93,13 +93,6 @@ class StateFeedback:
         xi [m s] sums it forward-Euler, as in the augmented model of ``lqr``."""
         return control.ss([[1.0]], [[sample_time_s / position_gain_v_per_m]],
                           [[self.integral_gain_v_per_m_s]], [[0.0]], sample_time_s)
-
-    def gain_on(self, n_states: int) -> np.ndarray:
-        """K padded with zeros to the filter's state (x, v, i[, x_d]): the
-        regulator uses the undelayed estimates, never x_d (paper §III-B)."""
-        gain = np.zeros(n_states)
-        gain[:3] = self.state_gain
-        return gain
 
 
 #: Eq. 22 and the K_I of §IV.

@@ -92,7 +92,8 @@ def test_lqg_loop_poles_are_regulator_and_filter_poles(sensor_lag_s):
     model = RIG.discrete_model(sensor_lag_s)
     n = model.nstates
     Kf, _ = analysis.steady_state_kalman(model, PAPER_FILTER_Q[:n, :n], PAPER_FILTER_R)
-    loop = analysis.closed_loop(model, PAPER_LQG.integrator(), Kf, True, PAPER_LQG.gain_on(n))
+    state_gain = np.r_[PAPER_LQG.state_gain, np.zeros(n - 3)]          # no feedback of x_d
+    loop = analysis.closed_loop(model, PAPER_LQG.integrator(), Kf, True, state_gain)
     A, B = integral_augmented_model()
     regulator = control.ss(A - B @ gain_vector(PAPER_LQG)[None], B, np.eye(4), 0, T).poles()
     Ad, C = np.asarray(model.A), np.asarray(model.C)
