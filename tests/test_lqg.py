@@ -205,3 +205,17 @@ def test_weight_out_of_range_is_one_line_error(capsys):
     assert main(["run", "lqg_vs_pid", "--set", "r_control=0"]) == 2
     err = capsys.readouterr().err.strip()
     assert "r_control" in err and "0.001" in err and "\n" not in err
+
+
+def test_stiffer_weights_of_the_worksheet_reach_the_papers_lqg_figures():
+    """Worksheet task 4 (q_x, q_v x100, q_xi x30): no overshoot (<= 2 %), the
+    filter still 5x faster, far less current than the PID, and the paper's
+    s_dyn,LQG = 6.7 N/µm within 5 % on the nonlinear plant."""
+    w = PAPER_LQR_WEIGHTS
+    values = EXERCISE.resolve({"lqg_gains": "LQR from Q_J, R_J", "q_position": 100 * w[0],
+                               "q_velocity": 100 * w[1], "q_current": w[2], "q_integral": 30 * w[3]})
+    metrics = EXERCISE.metrics(values, 0.05)
+    assert metrics["overshoot_lqg_percent"] <= 2.0
+    assert metrics["dominant_pole_ratio_filter_to_lqg"] >= 5.0
+    assert metrics["peak_current_lqg_a"] < 0.1 * metrics["peak_current_pid_a"]
+    assert metrics["dynamic_stiffness_lqg_n_per_um"] == pytest.approx(6.7, rel=0.05)
