@@ -266,6 +266,7 @@ class LabSession:
             lines += [f"| {label} (scope window) | {_format(value)} | {unit} |"
                       for label, value, unit in self.exercise.live_readouts(trace)]
         self.readouts.content = "\n".join(lines) + "\n\n" + "\n\n".join(f"*{n}*" for n in result.notes)
+        self.client.flush()                           # the readouts go out now, not with the next window
         data, options = self._pole_chart(result.poles)
         self.pole_plot.data, self.pole_plot.scales = data, options["scales"]
         rows = ["| set | Re s [rad/s] | Im s [rad/s] | damping ζ |", "|---|---:|---:|---:|"]

@@ -127,6 +127,8 @@ BAD_INPUT = [  # (argv after "run", strings the one error line must contain)
     pytest.param(["kalman_noise", "--duration", "nan"], ["--duration", "0.01", "60"], id="duration-nan"),
     pytest.param(["kalman_noise", "--duration", "0"], ["--duration", "0.01", "60"], id="duration-zero"),
     pytest.param(["kalman_noise", "--duration", "1e9"], ["--duration", "0.01", "60"], id="duration-huge"),
+    pytest.param(["kalman_noise", "--data", "recording.csv"], ["kalman_noise", "--data"], id="data-not-taken"),
+    pytest.param(["kalman_noise", "--set", "data=x.csv"], ["data", "--data FILE"], id="data-as-parameter"),
 ]
 
 
@@ -140,6 +142,12 @@ def test_bad_input_exits_2_with_one_line(argv, must_contain, capsys):
     assert err.endswith("\n") and len(err.splitlines()) == 1, err
     for token in must_contain:
         assert token in err, f"{token!r} not in {err!r}"
+
+
+def test_unknown_start_exercise_exits_2_before_serving(capsys):
+    assert main(["--exercise", "no_such_exercise", "--port", "1"]) == 2
+    _, err = capsys.readouterr()
+    assert len(err.splitlines()) == 1 and "no_such_exercise" in err and "kalman_noise" in err
 
 
 def test_bad_input_in_a_real_process():
