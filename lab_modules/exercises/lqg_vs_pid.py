@@ -77,9 +77,9 @@ PARAMETERS = (
       "Filter's process-noise variance on i per sample (eq. 17: 0.43 A²).", log=True, group="Kalman filter"),
     *(_kalman_noise[name] for name in ("filter_r_position", "filter_r_current", "sensor_noise_um",
                                        "current_noise_a", "disturbance_force_n", "force_law", "sensor_lag_us")),
-    P("reference_step_um", "Reference step Δx", "µm", 50.0, -200.0, 200.0,
+    P("reference_step_um", "Reference step Δx", "µm", 50.0, 1.0, 200.0,
       "Reference position step (Fig. 8: 50 µm).", step=1.0, group="Excitation"),
-    P("disturbance_step_n", "Disturbance step Δf_z", "N", 400.0, -1000.0, 1000.0,
+    P("disturbance_step_n", "Disturbance step Δf_z", "N", 400.0, 10.0, 1000.0,
       "Step of the disturbance force f_z (Fig. 9: 400 N).", step=10.0, group="Excitation"),
     P("scope_excitation", "Scope excitation", "", "reference step",
       choices=("reference step", "disturbance step"),
@@ -123,13 +123,12 @@ def setups(values: dict) -> dict[str, AxisSetup]:
         step_period_s=values["step_period_ms"] * 1e-3,
     )
     lqg = regulator(values)
+    pid = kalman_noise.cached_pid(values["pid_gain"], values["integral_time_ms"] * 1e-3,
+                                  values["derivative_time_ms"] * 1e-3, values["derivative_filter_us"] * 1e-6, T)
     return {
         "LQG": common.with_changes(controller=lqg.integrator(), state_gain=lqg.state_gain,
                                    use_estimate=values["integrator_input"] == "estimated"),
-        "PID": common.with_changes(
-            controller=kalman_noise.cached_pid(values["pid_gain"], values["integral_time_ms"] * 1e-3,
-                           values["derivative_time_ms"] * 1e-3, values["derivative_filter_us"] * 1e-6, T),
-            use_estimate=values["pid_feedback"] == "estimated"),
+        "PID": common.with_changes(controller=pid, use_estimate=values["pid_feedback"] == "estimated"),
     }
 
 
