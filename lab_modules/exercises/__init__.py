@@ -139,6 +139,7 @@ MODULES = (
     "kalman_noise",
     "ekf_parameters",
     "ekf_disturbance",
+    "lqg_vs_pid",
     "sensor_placement",
 )
 
