@@ -10,6 +10,8 @@ import viser
 from app.session import LabSession
 from lab_modules.exercises import get
 
+CAMERA_POSITION = (5.0, 5.0, 5.0)
+
 
 def serve(host: str = "127.0.0.1", port: int = 8080, exercise: str = "kalman_noise") -> None:
     """Serve the lab until interrupted; every connecting tab gets its own simulation,
@@ -17,6 +19,10 @@ def serve(host: str = "127.0.0.1", port: int = 8080, exercise: str = "kalman_noi
     chosen = get(exercise)
     chosen.simulation(chosen.resolve({})).advance(1)       # compile the loop before the first tab
     server = viser.ViserServer(host=host, port=port, label="AMB estimation lab", verbose=False)
+    # The default view direction (the space diagonal), from farther away: the 3D view is the
+    # narrow gap between the docked controls and charts, and the scenes must fit its width.
+    server.initial_camera.position = CAMERA_POSITION
+    server.initial_camera.look_at = (0.0, 0.0, 0.0)
     sessions: dict[int, LabSession] = {}
     lock = threading.Lock()
 

@@ -9,6 +9,7 @@ at the top swaps the whole lab for another exercise.
 
 from __future__ import annotations
 
+import itertools
 import threading
 import time
 from collections.abc import Iterator
@@ -26,6 +27,11 @@ SCOPE_WINDOW_S = 0.05             # simulated time shown on the scope (at the sl
 SCOPE_POINTS = 500                # points sent per series per frame
 SCOPE_ROWS = 20_000               # most samples the scope keeps
 POLE_COLORS = ("#7f7f7f", "#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e")
+CONTROL_WIDTH_PX = 380            # the docked controls (left)
+PANEL_WIDTH_PX = 600              # the docked charts (right) next to a 3D view: 386 px of 1366 stay for it
+WIDE_PANEL_WIDTH_PX = 900         # the charts of an exercise without a 3D view
+SCOPE_ASPECT = {False: 2.2, True: 3.2}     # width / height of a scope chart: narrow panel, wide panel
+LIGHT_DAMPING = 0.3               # poles below this damping always belong to the dominant view
 
 
 def _format(value: float) -> str:
@@ -42,52 +48,68 @@ def _analyses(result: Analysis | Iterator[Analysis]) -> Iterator[Analysis]:
 
 
 class LabSession:
-    """The lab in one browser tab."""
+    """The lab in one browser tab.
+
+    Each exercise shown in the tab is one *generation*: switching exercises
+    starts a new one, and the simulation thread and analyses of an older
+    generation stop writing to the tab (its GUI handles are gone)."""
 
     def __init__(self, client: viser.ClientHandle, exercise: Exercise):
         self.client = client
         self.exercises = registry()
-        self.lock = threading.Lock()
+        self.lock = threading.Lock()                  # values, simulation, buffer, running
+        self.gui_lock = threading.RLock()             # writes to the GUI handles; held while the GUI is rebuilt
+        self.generations = itertools.count()
+        self.generation = next(self.generations)
         self.closed = False
-        self.panel = None
         self.thread: threading.Thread | None = None
+        self.analysis_request: tuple[int, Exercise, dict] | None = None
+        self.analysis_wakeup = threading.Condition()
         client.gui.configure_theme(dark_mode=False, show_logo=False, control_width="large")
         self._start(exercise)
+        threading.Thread(target=self._analysis_worker, name=f"analysis-{client.client_id}", daemon=True).start()
 
     # -- life cycle ------------------------------------------------------------------
     def _start(self, exercise: Exercise) -> None:
         self.exercise = exercise
         self.values = exercise.resolve({})
         self.running = True
-        self.stopped = False                          # this exercise's thread should end
         self.simulation = exercise.simulation(self.values)
         self.columns = {name: 1 + i for i, name in enumerate(self.simulation.columns)}
         self.buffer = np.empty((0, 1 + len(self.columns)))
-        self.analysis_version = 0
+        self.shown_poles: dict[str, np.ndarray] | None = None
         self.scene = exercise.scene(self.values)
         self._build_gui()
         if self.scene is not None:
             self.scene.attach(self.client.scene)
         self._request_analysis()
-        self.thread = threading.Thread(target=self._run, name=f"lab-{self.client.client_id}", daemon=True)
+        self.thread = threading.Thread(target=self._run, args=(self.generation,),
+                                       name=f"lab-{self.client.client_id}", daemon=True)
         self.thread.start()
 
     def _switch(self, title: str) -> None:
         chosen = next(e for e in self.exercises.values() if e.title == title)
         if chosen is self.exercise:
             return
-        self.stopped = True
+        with self.gui_lock:
+            self.generation = next(self.generations)  # the old thread and analyses stop writing
         if self.thread is not None:
             self.thread.join(timeout=2.0)
-        if self.panel is not None:
-            self.panel.remove()
-        self.client.gui.reset()
-        self.client.scene.reset()
-        self._start(chosen)
+        with self.gui_lock:
+            self.client.gui.reset()
+            self.client.scene.reset()
+            self._start(chosen)
+
+    def _current(self, generation: int) -> bool:
+        """Whether ``generation`` still owns the tab's GUI (call holding ``gui_lock``)."""
+        return generation == self.generation and not self.closed
 
     def close(self) -> None:
-        """Stop the simulation thread; the tab is gone."""
-        self.closed = self.stopped = True
+        """Stop the simulation and analysis threads; the tab is gone."""
+        with self.gui_lock:
+            self.closed = True
+        with self.analysis_wakeup:
+            self.analysis_wakeup.notify()
 
     # -- GUI ---------------------------------------------------------------------
     def _build_gui(self) -> None:
@@ -120,23 +142,27 @@ class LabSession:
             self.charts = [self._add_chart(chart) for chart in self.exercise.charts]
             self.readouts = gui.add_markdown("*computing …*")
         with panel.add_tab("Pole map", viser.Icon.CHART_DOTS):
-            data, options = self._pole_chart(first.poles)
-            self.pole_plot = gui.add_uplot(data, **options, aspect=1.3)
-            gui.add_markdown("Poles in the s-plane (discrete poles mapped by s = ln z / T). "
-                             "Right of the imaginary axis: unstable.")
+            dominant, full = _pole_charts(first.poles)
+            self.pole_plots = tuple(gui.add_uplot(data, **options, aspect=1.6) for data, options in (dominant, full))
+            gui.add_markdown("Poles in the s-plane (discrete poles mapped by s = ln z / T); the dashed line is "
+                             "the imaginary axis, right of it is unstable. The first map leaves out the fast, "
+                             "well-damped poles (sensor lag, amplifier) that squash the second.")
             self.pole_table = gui.add_markdown("")
         if first.plots:
             with panel.add_tab("Analysis", viser.Icon.CHART_LINE):
                 self.plots = []
                 for plot in first.plots:
-                    data, options = self._plot_chart(plot)
+                    data, options = _plot_chart(plot)
                     self.plots.append(gui.add_uplot(data, **options, aspect=2.0))
         else:
             self.plots = []
         with panel.add_tab("Worksheet", viser.Icon.NOTEBOOK):
             gui.add_markdown((STATIC / "worksheets" / self.exercise.worksheet).read_text(encoding="utf-8"))
+        # Both panels docked, the 3D view in between; exercises without one give the charts its room.
+        gui.main_panel.dock_left()
+        gui.main_panel.set_width(CONTROL_WIDTH_PX)
         panel.dock_right()
-        panel.set_width(760)
+        panel.set_width(PANEL_WIDTH_PX if self.scene is not None else WIDE_PANEL_WIDTH_PX)
 
     def _add_input(self, parameter: Parameter):
         gui, value = self.client.gui, self.values[parameter.name]
@@ -167,38 +193,7 @@ class LabSession:
         return self.client.gui.add_uplot(
             empty, tuple(series), title=f"{chart.title} [{chart.unit}]", bands=bands,
             axes=(viser.uplot.Axis(label="time [ms]"), viser.uplot.Axis(label=f"{chart.title} [{chart.unit}]")),
-            scales={"x": viser.uplot.Scale(time=False)}, aspect=3.2)
-
-    @staticmethod
-    def _plot_chart(plot: Plot) -> tuple[tuple, dict]:
-        """uPlot arguments of a static analysis plot.  uPlot cannot range over
-        NaN gaps, so the y scale gets an explicit range from the finite data."""
-        x = np.asarray(plot.x, dtype=float)
-        ys = [np.asarray(y, dtype=float) for _, y, _ in plot.series]
-        series = (viser.uplot.Series(label=plot.x_label),) + tuple(
-            viser.uplot.Series(label=label, stroke=color, width=0,
-                               points=viser.uplot.Series_Points(show=True, size=8, fill=color, stroke=color))
-            if plot.points else
-            viser.uplot.Series(label=label, stroke=color, width=1.5, points=viser.uplot.Series_Points(show=False))
-            for label, _, color in plot.series)
-        return (x, *ys), {
-            "series": series, "title": plot.title,
-            "axes": (viser.uplot.Axis(label=plot.x_label), viser.uplot.Axis(label=plot.y_label)),
-            "scales": {"x": viser.uplot.Scale(time=False), "y": viser.uplot.Scale(auto=False, **_span(*ys))}}
-
-    @staticmethod
-    def _pole_chart(poles: dict[str, np.ndarray]) -> tuple[tuple, dict]:
-        """The pole map as a scatter plot: one shared, sorted real axis, each
-        pole set a series with gaps where the other sets have their poles."""
-        points = sorted((p.real, p.imag, index) for index, ps in enumerate(poles.values()) for p in ps)
-        x = np.array([p[0] for p in points]) if points else np.zeros(1)
-        columns = [np.full(len(x), np.nan) for _ in poles]
-        for row, (_, imag, which) in enumerate(points):
-            columns[which][row] = imag
-        plot = Plot("Poles [rad/s]", "Re s [rad/s]", "Im s [rad/s]", x,
-                    tuple((name, column, POLE_COLORS[i % len(POLE_COLORS)])
-                          for i, (name, column) in enumerate(zip(poles, columns))), points=True)
-        return LabSession._plot_chart(plot)
+            scales={"x": viser.uplot.Scale(time=False)}, aspect=SCOPE_ASPECT[self.scene is None])
 
     # -- events --------------------------------------------------------------------
     def _on_input(self, parameter: Parameter, shown) -> None:
@@ -247,43 +242,55 @@ class LabSession:
 
     # -- analysis (readouts, pole map, plots) -----------------------------------
     def _request_analysis(self) -> None:
-        self.analysis_version += 1
-        threading.Thread(target=self._analyse, args=(self.analysis_version, dict(self.values)),
-                         daemon=True).start()
+        """Ask the analysis thread for the current values; a newer request supersedes an older one."""
+        with self.analysis_wakeup:
+            self.analysis_request = (self.generation, self.exercise, dict(self.values))
+            self.analysis_wakeup.notify()
 
-    def _analyse(self, version: int, values: dict) -> None:
-        for result in _analyses(self.exercise.analyse(values)):
-            if version != self.analysis_version or self.stopped:
-                return                                # a newer slider move supersedes this one
-            self._show(result)
+    def _analysis_worker(self) -> None:
+        """One analysis at a time per tab, always of the newest values: an analysis
+        whose values were superseded stops at its next intermediate result."""
+        while True:
+            with self.analysis_wakeup:
+                while self.analysis_request is None and not self.closed:
+                    self.analysis_wakeup.wait()
+                if self.closed:
+                    return
+                (generation, exercise, values), self.analysis_request = self.analysis_request, None
+            for result in _analyses(exercise.analyse(values)):
+                if self.analysis_request is not None or not self._show(generation, result):
+                    break
 
-    def _show(self, result: Analysis) -> None:
+    def _show(self, generation: int, result: Analysis) -> bool:
+        """Show an analysis; False if the tab no longer shows its exercise."""
         lines = ["| quantity | value | unit |", "|---|---:|---|"]
         lines += [f"| {label} | {_format(value)} | {unit} |" for label, value, unit in result.readouts]
         with self.lock:
             trace = {name: self.buffer[:, column] for name, column in self.columns.items()}
-        if len(self.buffer) >= 10:
+        if len(next(iter(trace.values()), ())) >= 10:
             lines += [f"| {label} (scope window) | {_format(value)} | {unit} |"
                       for label, value, unit in self.exercise.live_readouts(trace)]
-        self.readouts.content = "\n".join(lines) + "\n\n" + "\n\n".join(f"*{n}*" for n in result.notes)
-        self.client.flush()                           # the readouts go out now, not with the next window
-        data, options = self._pole_chart(result.poles)
-        self.pole_plot.data, self.pole_plot.scales = data, options["scales"]
-        rows = ["| set | Re s [rad/s] | Im s [rad/s] | damping ζ |", "|---|---:|---:|---:|"]
-        for name, poles in result.poles.items():
-            for pole in sorted((p for p in poles if p.imag >= 0), key=lambda p: -p.real):
-                zeta = -pole.real / abs(pole) if abs(pole) > 0 else 1.0
-                rows.append(f"| {name} | {pole.real:.0f} | {pole.imag:.0f} | {zeta:.2f} |")
-        self.pole_table.content = "\n".join(rows)
-        for handle, plot in zip(self.plots, result.plots):
-            data, options = self._plot_chart(plot)
-            handle.data, handle.scales = data, options["scales"]
+        readouts = "\n".join(lines) + "\n\n" + "\n\n".join(f"*{n}*" for n in result.notes)
+        with self.gui_lock:
+            if not self._current(generation):
+                return False
+            self.readouts.content = readouts
+            self.client.flush()                       # the readouts go out now, not with the next window
+            if not _same_poles(result.poles, self.shown_poles):
+                self.shown_poles = result.poles
+                for handle, (data, options) in zip(self.pole_plots, _pole_charts(result.poles)):
+                    handle.data, handle.scales, handle.title = data, options["scales"], options["title"]
+                self.pole_table.content = _pole_table(result.poles)
+            for handle, plot in zip(self.plots, result.plots):
+                data, options = _plot_chart(plot)
+                handle.data, handle.scales = data, options["scales"]
+        return True
 
     # -- simulation thread -------------------------------------------------------------
-    def _run(self) -> None:
+    def _run(self, generation: int) -> None:
         carry, last = 0.0, time.perf_counter()
         T = self.simulation.sample_time_s
-        while not self.stopped:
+        while self._current(generation):
             time.sleep(FRAME_S)
             now = time.perf_counter()
             elapsed, last = now - last, now
@@ -301,11 +308,14 @@ class LabSession:
                 message = self.simulation.status_message()
                 if message:
                     self.running = False
-            self._draw()
-            if message:
-                self.status.content = f"**Paused — {message}**"
-                self.client.add_notification("Simulation stopped", message, color="red",
-                                             auto_close_seconds=10.0)
+            with self.gui_lock:
+                if not self._current(generation):
+                    return
+                self._draw()
+                if message:
+                    self.status.content = f"**Stopped: {message}** Press Run or Reset to start again."
+                    self.client.add_notification("Simulation stopped", message, color="red",
+                                                 auto_close_seconds=10.0)
 
     def _draw(self) -> None:
         with self.lock:
@@ -322,6 +332,88 @@ class LabSession:
                 columns += [(centre + 3 * sigma) * scale, (centre - 3 * sigma) * scale]
             columns += [rows[:, self.columns[s.column]] * s.scale for s in chart.series]
             handle.data = tuple(columns)
+
+
+def _plot_chart(plot: Plot) -> tuple[tuple, dict]:
+    """uPlot arguments of a static analysis plot.  uPlot cannot range over
+    NaN gaps, so the y scale gets an explicit range from the finite data."""
+    x = np.asarray(plot.x, dtype=float)
+    ys = [np.asarray(y, dtype=float) for _, y, _ in plot.series]
+    series = (viser.uplot.Series(label=plot.x_label),) + tuple(
+        viser.uplot.Series(label=label, stroke=color, width=0,
+                           points=viser.uplot.Series_Points(show=True, size=8, fill=color, stroke=color))
+        if plot.points else
+        viser.uplot.Series(label=label, stroke=color, width=1.5, points=viser.uplot.Series_Points(show=False))
+        for label, _, color in plot.series)
+    return (x, *ys), {
+        "series": series, "title": plot.title,
+        "axes": (viser.uplot.Axis(label=plot.x_label), viser.uplot.Axis(label=plot.y_label)),
+        "scales": {"x": viser.uplot.Scale(time=False), "y": viser.uplot.Scale(auto=False, **_span(*ys))}}
+
+
+def dominant_limit_rad_s(poles: dict[str, np.ndarray]) -> float:
+    """|s| up to which a pole counts as dominant: twice the median pole magnitude,
+    which leaves out the sensor-lag and amplifier poles (thousands of rad/s)
+    but keeps the rotor, controller and filter poles around them."""
+    magnitudes = np.abs(np.concatenate([np.asarray(p, dtype=complex) for p in poles.values()] or [np.zeros(0)]))
+    return 2.0 * float(np.median(magnitudes)) if magnitudes.size else np.inf
+
+
+def _pole_charts(poles: dict[str, np.ndarray]) -> tuple[tuple[tuple, dict], tuple[tuple, dict]]:
+    """uPlot arguments of the two pole maps: the dominant poles (slow, or lightly
+    damped: |s| below ``dominant_limit_rad_s`` or damping below ``LIGHT_DAMPING``)
+    and all poles."""
+    limit = dominant_limit_rad_s(poles)
+
+    def dominant(p: np.ndarray) -> np.ndarray:
+        damping = np.where(np.abs(p) > 0, -p.real / np.maximum(np.abs(p), 1e-300), 1.0)
+        return p[(np.abs(p) <= limit) | (damping < LIGHT_DAMPING)]
+
+    chosen = {name: dominant(np.asarray(p, dtype=complex)) for name, p in poles.items()}
+    return (_pole_map(chosen, f"Dominant poles (|s| < {limit:.0f} rad/s or damping ζ < {LIGHT_DAMPING})"),
+            _pole_map(poles, "All poles"))
+
+
+def _pole_map(poles: dict[str, np.ndarray], title: str) -> tuple[tuple, dict]:
+    """A pole map as a scatter plot over one shared, sorted real axis (each pole
+    set a series with gaps where the others have their poles), with the
+    imaginary axis drawn as a dashed line between two extra rows at Re s = 0."""
+    points = sorted((p.real, p.imag, index) for index, ps in enumerate(poles.values()) for p in ps)
+    imag = np.array([p[1] for p in points])
+    reach = float(np.abs(imag).max()) if imag.size else 0.0
+    if reach == 0.0:                                  # all poles real: a square-ish view of the real axis
+        reach = 0.5 * max((abs(p[0]) for p in points), default=1.0) or 1.0
+    reach *= 1.1
+    points += [(0.0, -reach, -1), (0.0, reach, -1)]
+    points.sort(key=lambda p: p[0])
+    x = np.array([p[0] for p in points])
+    columns = [np.full(len(x), np.nan) for _ in range(len(poles) + 1)]
+    for row, (_, value, which) in enumerate(points):
+        columns[which][row] = value                   # which = -1: the imaginary axis, the last column
+    series = (viser.uplot.Series(label="Re s [rad/s]"),) + tuple(
+        viser.uplot.Series(label=name, stroke=color, width=0,
+                           points=viser.uplot.Series_Points(show=True, size=8, fill=color, stroke=color))
+        for name, color in zip(poles, itertools.cycle(POLE_COLORS))) + (
+        viser.uplot.Series(label="Re s = 0", stroke="#000000", width=1, dash=(6.0, 4.0),
+                           points=viser.uplot.Series_Points(show=False)),)
+    return (x, *columns), {
+        "series": series, "title": title,
+        "axes": (viser.uplot.Axis(label="Re s [rad/s]"), viser.uplot.Axis(label="Im s [rad/s]")),
+        "scales": {"x": viser.uplot.Scale(time=False),
+                   "y": viser.uplot.Scale(auto=False, min=-1.05 * reach, max=1.05 * reach)}}
+
+
+def _same_poles(a: dict[str, np.ndarray], b: dict[str, np.ndarray] | None) -> bool:
+    return b is not None and a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)
+
+
+def _pole_table(poles: dict[str, np.ndarray]) -> str:
+    rows = ["| set | Re s [rad/s] | Im s [rad/s] | damping ζ |", "|---|---:|---:|---:|"]
+    for name, set_poles in poles.items():
+        for pole in sorted((p for p in set_poles if p.imag >= 0), key=lambda p: -p.real):
+            zeta = -pole.real / abs(pole) if abs(pole) > 0 else 1.0
+            rows.append(f"| {name} | {pole.real:.0f} | {pole.imag:.0f} | {zeta:.2f} |")
+    return "\n".join(rows)
 
 
 def _span(*arrays: np.ndarray) -> dict[str, float]:

@@ -1,0 +1,102 @@
+"""Shared fixtures of the browser tests: one lab server and one headless Chromium
+(Debian's, driven by Playwright) for the whole test run."""
+
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+CHROMIUM = "/usr/bin/chromium"
+FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
+         "--disable-component-update", "--disable-sync", "--no-first-run"]
+ROOT = Path(__file__).resolve().parent.parent
+VIEWPORT = {"width": 1366, "height": 768}      # the students' laptops
+
+browser_only = [pytest.mark.browser,
+                pytest.mark.skipif(not os.path.exists(CHROMIUM), reason="Debian's chromium is not installed")]
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="session")
+def lab_server(tmp_path_factory):
+    """The lab served on a free port (new tabs open on kalman_noise); yields (url, server log path)."""
+    port = _free_port()
+    log_path = tmp_path_factory.mktemp("lab-server") / "server.log"
+    log = log_path.open("w")
+    server = subprocess.Popen([sys.executable, "-m", "app", "--port", str(port)], cwd=ROOT,
+                              stdout=log, stderr=subprocess.STDOUT, text=True)
+    deadline = time.time() + 120
+    while time.time() < deadline:
+        with socket.socket() as s:
+            if s.connect_ex(("127.0.0.1", port)) == 0:
+                break
+        if server.poll() is not None:
+            pytest.fail(f"server exited: {log_path.read_text()}")
+        time.sleep(0.3)
+    yield f"http://127.0.0.1:{port}", log_path
+    server.terminate()
+    server.wait(timeout=10)
+    log.close()
+
+
+@pytest.fixture(scope="session")
+def lab_url(lab_server) -> str:
+    return lab_server[0]
+
+
+@pytest.fixture(scope="session")
+def browser():
+    sync_api = pytest.importorskip("playwright.sync_api")
+    with sync_api.sync_playwright() as p:
+        chromium = p.chromium.launch(executable_path=CHROMIUM, args=FLAGS)
+        yield chromium
+        chromium.close()
+
+
+class Tab:
+    """A browser tab on the lab that records console and page errors."""
+
+    def __init__(self, browser, url: str):
+        self.page = browser.new_page(viewport=VIEWPORT)
+        self.errors: list[str] = []
+        self.page.on("console", lambda m: self.errors.append(m.text) if m.type == "error" else None)
+        self.page.on("pageerror", lambda e: self.errors.append(str(e)))
+        self.page.goto(url)
+
+    def visible_input_values(self) -> list:
+        return self.page.locator("input").evaluate_all(
+            "els => els.map(e => (e.offsetParent !== null && e.type !== 'hidden') ? e.value : null)")
+
+    def switch_exercise(self, title: str) -> None:
+        """Choose ``title`` in the Exercise dropdown and wait for its heading."""
+        self.page.get_by_label("Exercise", exact=True).first.click()
+        self.page.get_by_role("option", name=title, exact=True).click()
+        self.page.get_by_role("heading", name=title).wait_for(timeout=30000)
+
+    def open_panel_tab(self, name: str) -> None:
+        self.page.get_by_role("tab", name=name).click()
+
+
+@pytest.fixture
+def open_tab(browser, lab_url):
+    """Factory of lab tabs; closes them after the test."""
+    tabs: list[Tab] = []
+
+    def opener() -> Tab:
+        tabs.append(Tab(browser, lab_url))
+        return tabs[-1]
+
+    yield opener
+    for tab in tabs:
+        tab.page.close()
