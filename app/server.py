@@ -33,7 +33,9 @@ def serve(host: str = "127.0.0.1", port: int = 8080, exercise: str = "kalman_noi
             sessions[client.client_id] = session
 
     @server.on_client_disconnect
-    def _(client: viser.ClientHandle) -> None:
+    async def _(client: viser.ClientHandle) -> None:
+        # async: runs on the event loop right after the connection closes (a plain function would
+        # wait for the thread pool while the tab's threads keep writing to the dead connection)
         with lock:
             session = sessions.pop(client.client_id, None)
         if session is not None:

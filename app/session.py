@@ -28,9 +28,9 @@ SCOPE_POINTS = 500                # points sent per series per frame
 SCOPE_ROWS = 20_000               # most samples the scope keeps
 POLE_COLORS = ("#7f7f7f", "#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e")
 CONTROL_WIDTH_PX = 380            # the docked controls (left)
-PANEL_WIDTH_PX = 600              # the docked charts (right) next to a 3D view: 386 px of 1366 stay for it
-WIDE_PANEL_WIDTH_PX = 900         # the charts of an exercise without a 3D view
-SCOPE_ASPECT = {False: 2.2, True: 3.2}     # width / height of a scope chart: narrow panel, wide panel
+PANEL_WIDTH_PX = 600              # the docked charts (right); of 1366 px, 386 stay for the 3D view and the
+                                  # notifications (which open there and would otherwise cover the panel's tabs)
+SCOPE_ASPECT = 2.2                # width / height of a scope chart
 LIGHT_DAMPING = 0.3               # poles below this damping always belong to the dominant view
 
 
@@ -158,11 +158,10 @@ class LabSession:
             self.plots = []
         with panel.add_tab("Worksheet", viser.Icon.NOTEBOOK):
             gui.add_markdown((STATIC / "worksheets" / self.exercise.worksheet).read_text(encoding="utf-8"))
-        # Both panels docked, the 3D view in between; exercises without one give the charts its room.
-        gui.main_panel.dock_left()
+        gui.main_panel.dock_left()                    # both panels docked, the 3D view in between
         gui.main_panel.set_width(CONTROL_WIDTH_PX)
         panel.dock_right()
-        panel.set_width(PANEL_WIDTH_PX if self.scene is not None else WIDE_PANEL_WIDTH_PX)
+        panel.set_width(PANEL_WIDTH_PX)
 
     def _add_input(self, parameter: Parameter):
         gui, value = self.client.gui, self.values[parameter.name]
@@ -193,7 +192,7 @@ class LabSession:
         return self.client.gui.add_uplot(
             empty, tuple(series), title=f"{chart.title} [{chart.unit}]", bands=bands,
             axes=(viser.uplot.Axis(label="time [ms]"), viser.uplot.Axis(label=f"{chart.title} [{chart.unit}]")),
-            scales={"x": viser.uplot.Scale(time=False)}, aspect=SCOPE_ASPECT[self.scene is None])
+            scales={"x": viser.uplot.Scale(time=False)}, aspect=SCOPE_ASPECT)
 
     # -- events --------------------------------------------------------------------
     def _on_input(self, parameter: Parameter, shown) -> None:
@@ -292,6 +291,8 @@ class LabSession:
         T = self.simulation.sample_time_s
         while self._current(generation):
             time.sleep(FRAME_S)
+            if not self._current(generation):         # the tab closed or switched during the sleep
+                return
             now = time.perf_counter()
             elapsed, last = now - last, now
             if self.scene is not None:

@@ -8,6 +8,7 @@ import socket
 import subprocess
 import sys
 import time
+import urllib.request
 from pathlib import Path
 
 import pytest
@@ -36,15 +37,17 @@ def lab_server(tmp_path_factory):
     log = log_path.open("w")
     server = subprocess.Popen([sys.executable, "-m", "app", "--port", str(port)], cwd=ROOT,
                               stdout=log, stderr=subprocess.STDOUT, text=True)
+    url = f"http://127.0.0.1:{port}"
     deadline = time.time() + 120
     while time.time() < deadline:
-        with socket.socket() as s:
-            if s.connect_ex(("127.0.0.1", port)) == 0:
-                break
-        if server.poll() is not None:
-            pytest.fail(f"server exited: {log_path.read_text()}")
-        time.sleep(0.3)
-    yield f"http://127.0.0.1:{port}", log_path
+        try:                                          # a real request: a bare connect makes the server log an error
+            urllib.request.urlopen(url, timeout=5).close()
+            break
+        except OSError:
+            if server.poll() is not None:
+                pytest.fail(f"server exited: {log_path.read_text()}")
+            time.sleep(0.3)
+    yield url, log_path
     server.terminate()
     server.wait(timeout=10)
     log.close()

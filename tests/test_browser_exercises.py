@@ -46,7 +46,7 @@ def test_every_exercise_in_one_tab(open_tab, lab_server):
         assert stopped or _scope_moves(page), f"{exercise.name}: the scope does not update"
         tab.open_panel_tab("Pole map")
         page.get_by_text("dominant poles", exact=False).first.wait_for(timeout=10000)
-        page.locator("table").filter(has_text="damping").first.wait_for(timeout=10000)
+        page.locator("table").filter(has_text="Im s [rad/s]").first.wait_for(timeout=10000)
         if page.get_by_role("tab", name="Analysis").count():
             tab.open_panel_tab("Analysis")
             page.locator(".uplot:visible").first.wait_for(timeout=10000)
