@@ -209,8 +209,8 @@ class LabSession:
             return
         self._request_analysis()                      # readouts first: they are what the student watches
         with self.lock:
-            if parameter.name == "seed":
-                self._reset()
+            if parameter.name == "seed" or self.simulation.status_message():
+                self._reset()                         # a stopped run is not carried on (it touched down)
             else:
                 self.simulation = self.exercise.retune(self.simulation, self.values)
         if self.scene is not None:

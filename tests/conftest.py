@@ -81,6 +81,13 @@ class Tab:
         return self.page.locator("input").evaluate_all(
             "els => els.map(e => (e.offsetParent !== null && e.type !== 'hidden') ? e.value : null)")
 
+    def set_number(self, label: str, value: str) -> None:
+        """Type ``value`` into the number box of the control labelled ``label``."""
+        row = self.page.get_by_text(label, exact=True).locator("xpath=../../..")
+        box = row.locator("input:visible").last
+        box.fill(value)
+        box.press("Enter")
+
     def switch_exercise(self, title: str) -> None:
         """Choose ``title`` in the Exercise dropdown and wait for its heading."""
         self.page.get_by_label("Exercise", exact=True).first.click()

@@ -7,7 +7,7 @@ from __future__ import annotations
 import re
 import time
 
-from lab_modules.exercises import registry
+from lab_modules.exercises import get, registry
 from tests.conftest import browser_only
 
 pytestmark = browser_only
@@ -59,3 +59,27 @@ def test_every_exercise_in_one_tab(open_tab, lab_server):
     warnings = [line for line in server_log.read_text().splitlines() if "closed connection" in line
                 or "Traceback" in line or "Error" in line]
     assert not warnings, warnings
+
+
+def test_a_stopped_simulation_says_why_and_recovers(open_tab):
+    """Four times the PID gains lets kalman_noise's rotor touch down: the status line
+    and a notification say so; Reset restarts it, and Run on sane gains keeps it running."""
+    tab = open_tab()
+    page = tab.page
+    page.get_by_role("heading", name=get("kalman_noise").title).wait_for(timeout=60000)
+    tab.set_number("Common gain factor [×]", "4")
+    page.get_by_text("Stopped: Touchdown").wait_for(timeout=20000)
+    page.get_by_text("Simulation stopped").wait_for(timeout=5000)
+    page.get_by_role("button", name="Reset").click()
+    page.get_by_text("Running", exact=True).wait_for(timeout=5000)
+    page.get_by_text("Stopped: Touchdown").wait_for(timeout=20000)     # the same gains touch down again
+    unstable = _readout_table(page).inner_text()
+    tab.set_number("Common gain factor [×]", "1")
+    deadline = time.time() + 10
+    while _readout_table(page).inner_text() == unstable and time.time() < deadline:
+        time.sleep(0.05)                              # until the change has landed
+    page.get_by_role("button", name="Run").click()
+    page.get_by_text("Running", exact=True).wait_for(timeout=5000)
+    time.sleep(2.0)
+    assert page.get_by_text("Stopped:").count() == 0
+    assert not tab.errors, tab.errors
