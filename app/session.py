@@ -169,8 +169,10 @@ class LabSession:
         if parameter.choices:
             handle = gui.add_dropdown(label, parameter.choices, initial_value=value, hint=parameter.description)
         elif parameter.log:
+            # three decimals of the exponent (0.2 % of the value) fit the number box
             handle = gui.add_slider(f"log₁₀ {label}", np.log10(parameter.minimum), np.log10(parameter.maximum),
-                                    step=0.01, initial_value=float(np.log10(value)), hint=parameter.description)
+                                    step=0.001, initial_value=round(float(np.log10(value)), 3),
+                                    hint=parameter.description)
         elif parameter.integer:
             handle = gui.add_number(label, int(value), min=int(parameter.minimum),
                                     max=int(parameter.maximum), step=1, hint=parameter.description)
@@ -309,11 +311,12 @@ class LabSession:
                 message = self.simulation.status_message()
                 if message:
                     self.running = False
+                    stopped = self.simulation
             with self.gui_lock:
                 if not self._current(generation):
                     return
                 self._draw()
-                if message:
+                if message and self.simulation is stopped and not self.running:   # not reset meanwhile
                     self.status.content = f"**Stopped: {message}** Press Run or Reset to start again."
                     self.client.add_notification("Simulation stopped", message, color="red",
                                                  auto_close_seconds=10.0)
@@ -352,26 +355,27 @@ def _plot_chart(plot: Plot) -> tuple[tuple, dict]:
         "scales": {"x": viser.uplot.Scale(time=False), "y": viser.uplot.Scale(auto=False, **_span(*ys))}}
 
 
-def dominant_limit_rad_s(poles: dict[str, np.ndarray]) -> float:
-    """|s| up to which a pole counts as dominant: twice the median pole magnitude,
-    which leaves out the sensor-lag and amplifier poles (thousands of rad/s)
-    but keeps the rotor, controller and filter poles around them."""
-    magnitudes = np.abs(np.concatenate([np.asarray(p, dtype=complex) for p in poles.values()] or [np.zeros(0)]))
-    return 2.0 * float(np.median(magnitudes)) if magnitudes.size else np.inf
+def dominant_decay_rad_s(poles: dict[str, np.ndarray]) -> float:
+    """Decay rate |Re s| up to which a pole counts as dominant: twice the median
+    decay rate, which leaves out the sensor-lag and amplifier poles (thousands
+    of rad/s) that squash the real axis, but keeps the rotor, controller and
+    filter poles around them."""
+    decay = np.abs(np.concatenate([np.asarray(p, dtype=complex) for p in poles.values()] or [np.zeros(0)]).real)
+    return 2.0 * float(np.median(decay)) if decay.size else np.inf
 
 
 def _pole_charts(poles: dict[str, np.ndarray]) -> tuple[tuple[tuple, dict], tuple[tuple, dict]]:
     """uPlot arguments of the two pole maps: the dominant poles (slow, or lightly
-    damped: |s| below ``dominant_limit_rad_s`` or damping below ``LIGHT_DAMPING``)
-    and all poles."""
-    limit = dominant_limit_rad_s(poles)
+    damped: |Re s| below ``dominant_decay_rad_s`` or damping below
+    ``LIGHT_DAMPING``) and all poles."""
+    limit = dominant_decay_rad_s(poles)
 
     def dominant(p: np.ndarray) -> np.ndarray:
-        damping = np.where(np.abs(p) > 0, -p.real / np.maximum(np.abs(p), 1e-300), 1.0)
-        return p[(np.abs(p) <= limit) | (damping < LIGHT_DAMPING)]
+        damping = -p.real / np.maximum(np.abs(p), 1e-300)
+        return p[(np.abs(p.real) <= limit) | (damping < LIGHT_DAMPING)]
 
     chosen = {name: dominant(np.asarray(p, dtype=complex)) for name, p in poles.items()}
-    return (_pole_map(chosen, f"Dominant poles (|s| < {limit:.0f} rad/s or damping ζ < {LIGHT_DAMPING})"),
+    return (_pole_map(chosen, f"Dominant poles (Re s > −{limit:.0f} rad/s or damping ζ < {LIGHT_DAMPING})"),
             _pole_map(poles, "All poles"))
 
 

@@ -13,6 +13,17 @@ from tests.conftest import browser_only
 pytestmark = browser_only
 
 
+CLIPPED_JS = """() => [...document.querySelectorAll('table, .uplot, label, h1, h2, h3, p, input')]
+    .filter(el => el.offsetParent !== null && el.getBoundingClientRect().width > 0)
+    .filter(el => el.getBoundingClientRect().right > window.innerWidth + 1 || el.scrollWidth > el.clientWidth + 1)
+    .map(el => el.tagName + ': ' + (el.innerText || el.value || '').slice(0, 60))"""
+
+
+def _clipped(page) -> list[str]:
+    """Visible tables, charts, labels, texts and number boxes cut off at the right."""
+    return page.evaluate(CLIPPED_JS)
+
+
 def _readout_table(page):
     return page.locator("table").filter(has_text="quantity").first
 
@@ -44,12 +55,15 @@ def test_every_exercise_in_one_tab(open_tab, lab_server):
         assert any(re.search(r"\d", cell) for cell in table.locator("td").all_inner_texts()), exercise.name
         stopped = page.get_by_text("Stopped:").count() > 0      # an unstable default setting, a lesson
         assert stopped or _scope_moves(page), f"{exercise.name}: the scope does not update"
+        assert not _clipped(page), (exercise.name, _clipped(page))
         tab.open_panel_tab("Pole map")
         page.get_by_text("dominant poles", exact=False).first.wait_for(timeout=10000)
         page.locator("table").filter(has_text="Im s [rad/s]").first.wait_for(timeout=10000)
+        assert not _clipped(page), (exercise.name, _clipped(page))
         if page.get_by_role("tab", name="Analysis").count():
             tab.open_panel_tab("Analysis")
             page.locator(".uplot:visible").first.wait_for(timeout=10000)
+            assert not _clipped(page), (exercise.name, _clipped(page))
         tab.open_panel_tab("Worksheet")
         page.get_by_role("heading", name=re.compile("Worksheet|Sensor placement")).first.wait_for(timeout=10000)
         tab.open_panel_tab("Scope")
