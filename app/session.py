@@ -12,6 +12,7 @@ from __future__ import annotations
 import itertools
 import threading
 import time
+import traceback
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -71,12 +72,12 @@ class LabSession:
 
     # -- life cycle ------------------------------------------------------------------
     def _start(self, exercise: Exercise) -> None:
-        self.exercise = exercise
-        self.values = exercise.resolve({})
-        self.running = True
-        self.simulation = exercise.simulation(self.values)
-        self.columns = {name: 1 + i for i, name in enumerate(self.simulation.columns)}
-        self.buffer = np.empty((0, 1 + len(self.columns)))
+        values = exercise.resolve({})
+        simulation = exercise.simulation(values)
+        with self.lock:
+            self.exercise, self.values, self.simulation, self.running = exercise, values, simulation, True
+            self.columns = {name: 1 + i for i, name in enumerate(simulation.columns)}
+            self.buffer = np.empty((0, 1 + len(self.columns)))
         self.shown_poles: dict[str, np.ndarray] | None = None
         self.scene = exercise.scene(self.values)
         self._build_gui()
@@ -258,15 +259,23 @@ class LabSession:
                 if self.closed:
                     return
                 (generation, exercise, values), self.analysis_request = self.analysis_request, None
-            for result in _analyses(exercise.analyse(values)):
-                if self.analysis_request is not None or not self._show(generation, result):
-                    break
+            try:
+                for result in _analyses(exercise.analyse(values)):
+                    if self.analysis_request is not None or not self._show(generation, result):
+                        break
+            except (ValueError, ArithmeticError) as error:   # incl. ParameterError, LinAlgError: the tab's
+                traceback.print_exc()                         # analyses go on at the next slider move
+                with self.gui_lock:
+                    if self._current(generation):
+                        self.readouts.content = f"⚠️ The analysis failed at these settings: {error}"
 
     def _show(self, generation: int, result: Analysis) -> bool:
         """Show an analysis; False if the tab no longer shows its exercise."""
         lines = ["| quantity | value | unit |", "|---|---:|---|"]
         lines += [f"| {label} | {_format(value)} | {unit} |" for label, value, unit in result.readouts]
         with self.lock:
+            if generation != self.generation:
+                return False
             trace = {name: self.buffer[:, column] for name, column in self.columns.items()}
         if len(next(iter(trace.values()), ())) >= 10:
             lines += [f"| {label} (scope window) | {_format(value)} | {unit} |"
