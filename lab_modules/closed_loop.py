@@ -111,7 +111,7 @@ def run(n_steps, first_step, plant, plant_A, plant_B_u, plant_B_f, nonlinear, ph
         y[0] = K_mx * plant[3] + noise_sigma[2] * noise[k, 2]
         y[1] = K_mi * plant[2] + noise_sigma[3] * noise[k, 3]
         # 2. filter correction
-        update(x_hat, P, C_f, y, R_diag, gain)
+        update(x_hat, P, C_f, y, R_diag, gain, STATE_SIZE)
         # 3.-4. feedback and controller
         feedback = K_mx * x_hat[0] if use_estimate else y[0]
         e = K_mx * reference_m[k] - feedback

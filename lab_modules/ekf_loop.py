@@ -79,7 +79,7 @@ def run(n_steps, model, plant, plant_physics, x_hat, P, Q, R_diag, C, filter_phy
         # 1.-2. sensors and filter correction
         y[0] = K_mx * plant[3] + noise_sigma[2] * noise[k, 2]
         y[1] = K_mi * plant[2] + noise_sigma[3] * noise[k, 3]
-        nis = ef.update(x_hat, P, C, y, R_diag, gain)
+        nis = ef.update(x_hat, P, C, y, R_diag, gain, N_STATES)
         # 3.-4. feedback, PID and feedforward
         feedback = K_mx * x_hat[0] if use_estimate else y[0]
         e = K_mx * reference_m[k] - feedback
