@@ -68,6 +68,26 @@ def _rk4_step(s, u, f_z, p, T, k1, k2, k3, k4, tmp):
         s[j] += T / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j])
 
 
+@numba.njit(inline="always", **JIT)
+def controller_step(e, offset_v, u_limit, ctrl, Ac, Bc, Cc, Dc, work):
+    """One sample of the discrete SISO controller (Ac, Bc, Cc, Dc) on the error e [V]:
+    returns i_ref = Cc ctrl + Dc e + offset_v clipped at ±u_limit [V] (offset: state
+    feedback -K_s x_hat, eq. 22, or a feedforward), and advances its state
+    ctrl <- Ac ctrl + Bc e in place (``work``: scratch of ctrl's size)."""
+    n_c = ctrl.shape[0]
+    u = Dc[0, 0] * e + offset_v
+    for r in range(n_c):
+        u += Cc[0, r] * ctrl[r]
+    for r in range(n_c):
+        acc = Bc[r, 0] * e
+        for c in range(n_c):
+            acc += Ac[r, c] * ctrl[c]
+        work[r] = acc
+    for r in range(n_c):
+        ctrl[r] = work[r]
+    return min(max(u, -u_limit), u_limit)
+
+
 @numba.njit(**JIT)
 def run(n_steps, first_step, plant, plant_A, plant_B_u, plant_B_f, nonlinear, physics,
         x_hat, P, A_f, B_f, C_f, Q_f, R_diag,
@@ -99,12 +119,11 @@ def run(n_steps, first_step, plant, plant_A, plant_B_u, plant_B_f, nonlinear, ph
     -------
     (status, steps_done): status OK, DIVERGED (non-finite) or TOUCHDOWN.
     """
-    n_c = ctrl.shape[0]
     T, Tmx, K_mx, K_mi = physics[8], physics[7], physics[9], physics[10]
     y = np.empty(2)
     gain = np.empty((2, STATE_SIZE))
     work_x, work_P = np.empty(STATE_SIZE), np.empty((STATE_SIZE, STATE_SIZE))
-    new_plant, new_ctrl = np.empty(4), np.empty(max(n_c, 1))
+    new_plant, work_ctrl = np.empty(4), np.empty(max(ctrl.shape[0], 1))
     k1, k2, k3, k4, tmp = np.empty(4), np.empty(4), np.empty(4), np.empty(4), np.empty(4)
     for k in range(n_steps):
         # 1. sensors
@@ -115,19 +134,10 @@ def run(n_steps, first_step, plant, plant_A, plant_B_u, plant_B_f, nonlinear, ph
         # 3.-4. feedback and controller
         feedback = K_mx * x_hat[0] if use_estimate else y[0]
         e = K_mx * reference_m[k] - feedback
-        u = Dc[0, 0] * e
-        for r in range(n_c):
-            u += Cc[0, r] * ctrl[r]
+        state_feedback = 0.0
         for j in range(STATE_SIZE):
-            u -= state_gain[j] * x_hat[j]
-        u = min(max(u, -u_limit), u_limit)
-        for r in range(n_c):
-            acc = Bc[r, 0] * e
-            for c in range(n_c):
-                acc += Ac[r, c] * ctrl[c]
-            new_ctrl[r] = acc
-        for r in range(n_c):
-            ctrl[r] = new_ctrl[r]
+            state_feedback += state_gain[j] * x_hat[j]
+        u = controller_step(e, -state_feedback, u_limit, ctrl, Ac, Bc, Cc, Dc, work_ctrl)
         trace[k, 0] = (first_step + k) * T
         trace[k, 1] = plant[0]
         trace[k, 2] = y[0] / K_mx

@@ -30,7 +30,7 @@ from scipy.signal import max_len_seq
 
 from . import extended_filters as ef
 from .amb_axis import RIG, BearingAxis
-from .closed_loop import _rk4_step
+from .closed_loop import _rk4_step, controller_step
 from .controllers import pid
 from .extended_filters import N_STATES
 
@@ -67,12 +67,11 @@ def run(n_steps, model, plant, plant_physics, x_hat, P, Q, R_diag, C, filter_phy
 
     Returns (status, steps_done).
     """
-    n_c = ctrl.shape[0]
     T, Tmx, K_mx, K_mi = plant_physics[8], plant_physics[7], plant_physics[9], plant_physics[10]
     y, gain = np.empty(2), np.empty((2, N_STATES))
     F, Phi, work = np.empty((N_STATES, N_STATES)), np.empty((N_STATES, N_STATES)), \
         np.empty((6, N_STATES, N_STATES))
-    new_ctrl = np.empty(max(n_c, 1))
+    work_ctrl = np.empty(max(ctrl.shape[0], 1))
     k1, k2, k3, k4, tmp = np.empty(4), np.empty(4), np.empty(4), np.empty(4), np.empty(4)
     nan = np.nan
     for k in range(n_steps):
@@ -83,19 +82,8 @@ def run(n_steps, model, plant, plant_physics, x_hat, P, Q, R_diag, C, filter_phy
         # 3.-4. feedback, PID and feedforward
         feedback = K_mx * x_hat[0] if use_estimate else y[0]
         e = K_mx * reference_m[k] - feedback
-        u = Dc[0, 0] * e
-        for r in range(n_c):
-            u += Cc[0, r] * ctrl[r]
-        if model == ef.NONLINEAR:
-            u += feedforward_v_per_n * x_hat[4]
-        u = min(max(u, -u_limit), u_limit)
-        for r in range(n_c):
-            acc = Bc[r, 0] * e
-            for c in range(n_c):
-                acc += Ac[r, c] * ctrl[c]
-            new_ctrl[r] = acc
-        for r in range(n_c):
-            ctrl[r] = new_ctrl[r]
+        feedforward = feedforward_v_per_n * x_hat[4] if model == ef.NONLINEAR else 0.0
+        u = controller_step(e, feedforward, u_limit, ctrl, Ac, Bc, Cc, Dc, work_ctrl)
         row = trace[k]
         row[0], row[1], row[2] = plant[0], y[0] / K_mx, x_hat[0]
         row[3], row[4], row[5] = np.sqrt(max(P[0, 0], 0.0)), plant[2], u

@@ -33,15 +33,15 @@ _JIT = {"nogil": True, "cache": True, "fastmath": True}
 STATE_SIZE = 4
 
 
-# The kernels take the number of states ``n_states`` as a compile-time constant
-# (``numba.literally``): numba compiles one specialisation per size, whose
-# loops the compiler unrolls (about 2x faster than loops of run-time length).
-# The extended filters (``extended_filters``, 5 states) share them.
+# The kernels below serve any number of states ``n_states``; the extended
+# filters (``extended_filters``, 5 states) share them.  Numba inlines them into
+# each compiled caller (``inline="always"``), so the caller's constant
+# (``STATE_SIZE``, ``N_STATES``) fixes the loop lengths at compile time and the
+# compiler unrolls them (about 2x faster than loops of run-time length).
 
-@numba.njit(**_JIT)
+@numba.njit(inline="always", **_JIT)
 def propagate_covariance(P, A, Q, work_P, n_states):
     """P <- A P A^T + Q in place (eq. 2; eq. 6 with A = Phi), exactly symmetric."""
-    numba.literally(n_states)
     n = n_states
     for r in range(n):
         for c in range(n):
@@ -73,7 +73,7 @@ def predict(x, P, A, B, u, Q, work_x, work_P):
     propagate_covariance(P, A, Q, work_P, STATE_SIZE)
 
 
-@numba.njit(**_JIT)
+@numba.njit(inline="always", **_JIT)
 def update_scalar(x, P, c_row, y, r, gain, n_states):
     """Eq. 2 (and eq. 6), correction with one scalar measurement y = c x + eta, var(eta) = r.
 
@@ -82,7 +82,6 @@ def update_scalar(x, P, c_row, y, r, gain, n_states):
     M P = P - K a^T with a = P c^T = s K, and (M P) M^T = W - (W c^T) K^T
     with W c^T = a - K (c P c^T).
     Writes the Kalman gain into ``gain``; returns the innovation and its variance."""
-    numba.literally(n_states)
     n = n_states
     innovation = y
     for i in range(n):
@@ -111,12 +110,11 @@ def update_scalar(x, P, c_row, y, r, gain, n_states):
     return innovation, s
 
 
-@numba.njit(**_JIT)
+@numba.njit(inline="always", **_JIT)
 def update(x, P, C, y, R_diag, gain, n_states):
     """Eq. 2 (and eq. 6), correction with the measurement vector y (diagonal R),
     one scalar measurement at a time.  Writes the gains (one row per
     measurement) into ``gain``; returns the normalised innovation squared (NIS)."""
-    numba.literally(n_states)
     nis = 0.0
     for m in range(C.shape[0]):
         innovation, s = update_scalar(x, P, C[m], y[m], R_diag[m], gain[m], n_states)
