@@ -21,7 +21,6 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from functools import lru_cache
 
 import control
 import numba
@@ -31,7 +30,6 @@ from scipy.signal import max_len_seq
 from . import extended_filters as ef
 from .amb_axis import RIG, BearingAxis
 from .closed_loop import _rk4_step, controller_step
-from .controllers import pid
 from .extended_filters import N_STATES
 
 OK, DIVERGED, TOUCHDOWN, FILTER_DIVERGED = 0, 1, 2, 3
@@ -115,11 +113,6 @@ def run(n_steps, model, plant, plant_physics, x_hat, P, Q, R_diag, C, filter_phy
         if abs(plant[0]) >= touchdown_m:
             return TOUCHDOWN, k + 1
     return OK, n_steps
-
-
-#: ``controllers.pid`` remembered per setting: its discretisation takes tens of
-#: milliseconds, and the analyses build the same PID for several runs.
-cached_pid = lru_cache(maxsize=16)(pid)
 
 
 def no_input(t: np.ndarray) -> np.ndarray:
