@@ -220,3 +220,34 @@ class ContinuousTimeEKF:
         """Integrate the Kalman-Bucy equations over dt with u and z held."""
         bucy_step(self.x, self.P, float(u), float(z), self.constants, self.Q,
                   self.measurement_density(dt), float(dt))
+
+
+#: Columns written by ``run_observer`` (one row per sample, after the update).
+OBSERVER_COLUMNS = ("x_estimated_m", "velocity_estimated_m_per_s", "current_estimated_a",
+                    "x_sigma_m", "velocity_sigma_m_per_s", "current_sigma_a",
+                    "innovation_m", "innovation_sigma_m", "nis")
+
+
+@numba.njit(**_JIT)
+def run_observer(time_s, measured_m, voltage_v, x, P, Q, r, p, n_substeps, out):
+    """The continuous-discrete EKF as a pure observer of a recording (§3.5, Fig. 3.23).
+
+    At each sample k: update with y_k (eq. 2.40-2.42), write a row of
+    ``OBSERVER_COLUMNS``, propagate to t_{k+1} with the recorded voltage u_k
+    held (eq. 2.43-2.45).  Returns the number of rows written (fewer than the
+    samples if the estimate stops being finite)."""
+    gain = np.empty(3)
+    n = time_s.shape[0]
+    for k in range(n):
+        innovation, s = update(x, P, measured_m[k], r, gain)
+        row = out[k]
+        row[0], row[1], row[2] = x[0], x[1], x[2]
+        row[3], row[4], row[5] = np.sqrt(max(P[0, 0], 0.0)), np.sqrt(max(P[1, 1], 0.0)), \
+            np.sqrt(max(P[2, 2], 0.0))
+        row[6], row[7], row[8] = innovation, np.sqrt(s), innovation * innovation / s
+        if not (np.isfinite(x[0]) and np.isfinite(x[1]) and np.isfinite(x[2]) and np.isfinite(P[0, 0])
+                and x[0] > 0.0):
+            return k
+        if k + 1 < n:
+            propagate(x, P, voltage_v[k], p, Q, time_s[k + 1] - time_s[k], n_substeps)
+    return n
