@@ -14,9 +14,10 @@ input u = coil voltage [V], output y = x1 (eq. 2.10-2.11)::
 
 Notes on the paper's numbers:
 
-* Table 3.1 gives m = 0.055066 kg; the paper's code (App. F, G) uses
-  0.05506 kg.  The lab uses the table value; the difference (0.01 %) is
-  invisible in every figure.
+* Table 3.1 prints m = 0.055066 kg, but §3.3 weighs the ball at 0.05506 kg,
+  the code (App. F, G) uses 0.05506 kg, and Table 3.1's own plant current
+  0.89409 A follows from eq. 2.14 only with 0.05506 kg (0.055066 kg gives
+  0.89414 A).  The lab uses 0.05506 kg.
 * The paper's Jacobian (App. F, G) has 3 (C/m) x3^2/x1^3 in row 2, column 1;
   the derivative of eq. 2.10 is 2 (C/m) x3^2/x1^3.  The lab uses the
   derivative (checked against finite differences in the tests).
@@ -42,7 +43,7 @@ _JIT = {"nogil": True, "cache": True}
 class MaglevPlant:
     """Table 3.1 parameters (paper 004)."""
 
-    mass_kg: float = 0.055066                 # m, levitated steel ball
+    mass_kg: float = 0.05506                  # m, levitated steel ball (§3.3; see module docstring)
     coil_inductance_h: float = 0.59           # L_c
     incremental_inductance_h: float = 0.02    # L_0, added by the ball (eq. 2.6)
     coil_resistance_ohm: float = 25.0         # R_c
