@@ -9,13 +9,23 @@ import scipy.integrate
 import scipy.linalg
 from filterpy.kalman import ExtendedKalmanFilter
 
-from lab_modules.continuous_discrete_ekf import ContinuousDiscreteEKF, ContinuousTimeEKF
+from lab_modules.continuous_discrete_ekf import ContinuousDiscreteEKF
 from lab_modules.maglev import (
-    LEAD_LAG, TABLE_3_1, decoupling_gain_v_per_m_s3, derivative, feedback_gain, jacobian,
-    linearising_control, linearising_coordinates,
+    LEAD_LAG,
+    TABLE_3_1,
+    decoupling_gain_v_per_m_s3,
+    derivative,
+    feedback_gain,
+    jacobian,
+    linearising_control,
+    linearising_coordinates,
 )
 from lab_modules.maglev_simulation import (
-    MaglevSetup, MaglevSimulation, Reference, ReferenceGenerator, table_3_1_q,
+    MaglevSetup,
+    MaglevSimulation,
+    Reference,
+    ReferenceGenerator,
+    table_3_1_q,
 )
 
 P = TABLE_3_1.constants()
@@ -231,7 +241,7 @@ def test_paper_continuous_time_filter_misjudges_its_error():
     """The paper's first (continuous-time) filter with R used as a density: its 3-sigma
     band is more than ten times its actual error; with R dt it agrees with the
     continuous-discrete filter.  With the hardware's 0.0034 mm sensor it diverges."""
-    base = dict(initial_covariance=1e-5)
+    base = {"initial_covariance": 1e-5}
     _, cd = run(**base)
     _, paper = run(filter="continuous-time (paper)", **base)
     _, fixed = run(filter="continuous-time (R dt)", initial_covariance=1e-7)
