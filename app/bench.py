@@ -43,7 +43,7 @@ def filterpy_loop(sim, n_steps: int) -> np.ndarray:
     physics, sigma = sim._physics, setup.noise_sigma
     K_mx, K_mi, T = physics[9], physics[10], physics[8]
     reference, disturbance = sim.inputs(n_steps)
-    noise = np.random.default_rng(sim.seed).standard_normal((n_steps, 4))
+    noise = sim.noise(n_steps)
     A4, Bu4, Bf4 = sim._plant_linear
     scratch = [np.empty(4) for _ in range(5)]
     estimates = np.empty(n_steps)

@@ -1,8 +1,8 @@
 """Command line of the lab.
 
-    python -m app [--host H] [--port P]        start the browser lab (default)
+    python -m app [--host H] [--port P] [--exercise NAME]   start the browser lab (default)
     python -m app list [--json]                exercises and their parameters
-    python -m app run NAME [--set N=V ...] [--duration S] [--seed N] [--json]
+    python -m app run NAME [--set N=V ...] [--duration S] [--seed N] [--data FILE] [--json]
     python -m app bench [--json]               throughput benchmark
 
 Bad input (unknown exercise or parameter, non-numbers, NaN, out of range)
@@ -15,6 +15,7 @@ import argparse
 import json
 import math
 import sys
+from pathlib import Path
 
 from lab_modules.exercises import get, registry
 from lab_modules.parameters import ParameterError
@@ -26,6 +27,8 @@ def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m app", description="AMB estimation lab")
     parser.add_argument("--host", default="127.0.0.1", help="address to serve on (default 127.0.0.1)")
     parser.add_argument("--port", type=int, default=8080, help="port to serve on (default 8080)")
+    parser.add_argument("--exercise", default="kalman_noise",
+                        help="exercise a new tab opens on (default kalman_noise; tabs can switch)")
     sub = parser.add_subparsers(dest="command")
     sub.add_parser("serve", help="start the browser lab (the default)")
     listing = sub.add_parser("list", help="list exercises and their parameters")
@@ -36,6 +39,8 @@ def _parser() -> argparse.ArgumentParser:
                      help="override a parameter (repeatable)")
     run.add_argument("--duration", default=None, help="simulated seconds (default: the exercise's)")
     run.add_argument("--seed", default=None, help="random seed (same as --set seed=N)")
+    run.add_argument("--data", default=None, metavar="FILE",
+                     help="data file for exercises that take one (e.g. a recording CSV)")
     run.add_argument("--json", action="store_true", help="print JSON")
     bench = sub.add_parser("bench", help="closed-loop throughput benchmark")
     bench.add_argument("--json", action="store_true", help="print JSON")
@@ -94,11 +99,30 @@ def command_list(as_json: bool) -> int:
     return 0
 
 
+def _data(exercise, path):
+    """The exercise's parsed data file (None: its shipped default)."""
+    if path is None:
+        return None
+    if exercise.data_description is None:
+        raise ParameterError(f"exercise {exercise.name!r} takes no --data file")
+    try:
+        content = Path(path).read_bytes()
+    except OSError as error:
+        raise ParameterError(f"--data {path!r}: {error.strerror}") from None
+    return exercise.load_data(Path(path).name, content)
+
+
 def command_run(args) -> int:
     exercise = get(args.exercise)
-    values = exercise.resolve(_overrides(args.set, args.seed))
+    overrides = _overrides(args.set, args.seed)
+    if "data" in overrides:
+        raise ParameterError("'data' is not a parameter: use --data FILE")
+    values = exercise.resolve({**overrides, "data": _data(exercise, args.data)})
     duration = _duration(args.duration, exercise.default_duration_s)
-    result = {"exercise": exercise.name, "parameters": values,
+    shown = {name: value for name, value in values.items() if name != "data"}
+    if args.data is not None:
+        shown["data"] = args.data
+    result = {"exercise": exercise.name, "parameters": shown,
               "model": exercise.model(values), "metrics": exercise.metrics(values, duration)}
     if args.json:
         print(json.dumps(_jsonable(result), indent=2, ensure_ascii=False))
@@ -122,5 +146,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {error}", file=sys.stderr)
         return USAGE_ERROR
     from app.server import serve
-    serve(args.host, args.port)
+    try:
+        get(args.exercise)
+    except ParameterError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return USAGE_ERROR
+    serve(args.host, args.port, args.exercise)
     return 0

@@ -8,12 +8,13 @@ import time
 import viser
 
 from app.session import LabSession
-from lab_modules.exercises import registry
+from lab_modules.exercises import get
 
 
 def serve(host: str = "127.0.0.1", port: int = 8080, exercise: str = "kalman_noise") -> None:
-    """Serve the lab until interrupted; every connecting tab gets its own simulation."""
-    chosen = registry()[exercise]
+    """Serve the lab until interrupted; every connecting tab gets its own simulation,
+    starting on ``exercise`` (each tab can switch)."""
+    chosen = get(exercise)
     chosen.simulation(chosen.resolve({})).advance(1)       # compile the loop before the first tab
     server = viser.ViserServer(host=host, port=port, label="AMB estimation lab", verbose=False)
     sessions: dict[int, LabSession] = {}

@@ -1,35 +1,44 @@
-"""One browser tab's lab: its own simulation, parameters, seed and views.
+"""One browser tab's lab: its own exercise, simulation, parameters, seed and views.
 
 A ``LabSession`` builds the GUI of an exercise generically from the
-exercise's parameters, charts and analysis, runs the simulation on its own
-thread (the compiled loop releases the GIL, so tabs run in parallel) and
-stops everything when the tab closes.
+exercise's parameters, charts, analysis and optional 3D scene, runs the
+simulation on its own thread (the compiled loops release the GIL, so tabs run
+in parallel) and stops everything when the tab closes.  The exercise chooser
+at the top swaps the whole lab for another exercise.
 """
 
 from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import viser
 
-from lab_modules.closed_loop import TRACE_COLUMNS
-from lab_modules.exercises import Exercise
+from lab_modules.exercises import Analysis, Chart, Exercise, Plot, registry
 from lab_modules.parameters import Parameter, ParameterError
 
 STATIC = Path(__file__).resolve().parent.parent / "static"
 FRAME_S = 1 / 25                  # display refresh
-SCOPE_WINDOW_S = 0.05             # simulated time shown on the scope
+SCOPE_WINDOW_S = 0.05             # simulated time shown on the scope (at the slowest time scale)
 SCOPE_POINTS = 500                # points sent per series per frame
-POLE_COLORS = {"open-loop plant": "#7f7f7f", "closed loop": "#1f77b4", "filter error": "#d62728"}
+SCOPE_ROWS = 20_000               # most samples the scope keeps
+POLE_COLORS = ("#7f7f7f", "#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e")
 
 
 def _format(value: float) -> str:
-    if not np.isfinite(value):
+    if np.isnan(value):
+        return "…"
+    if np.isinf(value):
         return "∞ (unstable)"
     return f"{value:.3g}" if abs(value) < 1e4 else f"{value:.3e}"
+
+
+def _analyses(result: Analysis | Iterator[Analysis]) -> Iterator[Analysis]:
+    """An exercise's ``analyse`` returns one ``Analysis`` or yields a quick one, then fuller ones."""
+    return iter((result,)) if isinstance(result, Analysis) else result
 
 
 class LabSession:
@@ -37,47 +46,93 @@ class LabSession:
 
     def __init__(self, client: viser.ClientHandle, exercise: Exercise):
         self.client = client
+        self.exercises = registry()
+        self.lock = threading.Lock()
+        self.closed = False
+        self.panel = None
+        self.thread: threading.Thread | None = None
+        client.gui.configure_theme(dark_mode=False, show_logo=False, control_width="large")
+        self._start(exercise)
+
+    # -- life cycle ------------------------------------------------------------------
+    def _start(self, exercise: Exercise) -> None:
         self.exercise = exercise
         self.values = exercise.resolve({})
-        self.lock = threading.Lock()
         self.running = True
-        self.closed = False
+        self.stopped = False                          # this exercise's thread should end
         self.simulation = exercise.simulation(self.values)
-        self.columns = {name: 1 + i for i, name in enumerate(TRACE_COLUMNS)}
-        self.buffer = np.empty((0, len(TRACE_COLUMNS) + 1))
-        self.inputs: dict[str, viser.GuiInputHandle] = {}
+        self.columns = {name: 1 + i for i, name in enumerate(self.simulation.columns)}
+        self.buffer = np.empty((0, 1 + len(self.columns)))
         self.analysis_version = 0
+        self.scene = exercise.scene(self.values)
         self._build_gui()
+        if self.scene is not None:
+            self.scene.attach(self.client.scene)
         self._request_analysis()
-        self.thread = threading.Thread(target=self._run, name=f"lab-{client.client_id}", daemon=True)
+        self.thread = threading.Thread(target=self._run, name=f"lab-{self.client.client_id}", daemon=True)
         self.thread.start()
+
+    def _switch(self, title: str) -> None:
+        chosen = next(e for e in self.exercises.values() if e.title == title)
+        if chosen is self.exercise:
+            return
+        self.stopped = True
+        if self.thread is not None:
+            self.thread.join(timeout=2.0)
+        if self.panel is not None:
+            self.panel.remove()
+        self.client.gui.reset()
+        self.client.scene.reset()
+        self._start(chosen)
+
+    def close(self) -> None:
+        """Stop the simulation thread; the tab is gone."""
+        self.closed = self.stopped = True
 
     # -- GUI ---------------------------------------------------------------------
     def _build_gui(self) -> None:
         gui = self.client.gui
-        gui.configure_theme(dark_mode=False, show_logo=False, control_width="large")
+        titles = tuple(e.title for e in self.exercises.values())
+        chooser = gui.add_dropdown("Exercise", titles, initial_value=self.exercise.title,
+                                   hint="Switch this tab to another exercise (starts it on its defaults).")
+        chooser.on_update(lambda _event: self._switch(chooser.value))
         gui.add_markdown(f"### {self.exercise.title}")
         self.status = gui.add_markdown("**Running**")
         buttons = gui.add_button_group("Simulation", ("Run", "Pause", "Reset"))
         buttons.on_click(lambda event: self._on_button(event.target.value))
+        if self.exercise.data_description:
+            upload = gui.add_upload_button("Load recording (CSV)", icon=viser.Icon.UPLOAD, mime_type=".csv,text/csv",
+                                           hint=self.exercise.data_description)
+            upload.on_upload(lambda _event: self._on_upload(upload.value))
+        self.inputs: dict[str, viser.GuiInputHandle] = {}
         groups: dict[str, list[Parameter]] = {}
         for parameter in self.exercise.parameters:
             groups.setdefault(parameter.group, []).append(parameter)
-        for group, parameters in groups.items():
-            with gui.add_folder(group, expand_by_default=group in ("Noise", "Controller", "Run")):
+        for index, (group, parameters) in enumerate(groups.items()):
+            with gui.add_folder(group, expand_by_default=index == 0 or group in ("Controller", "Run")):
                 for parameter in parameters:
                     self.inputs[parameter.name] = self._add_input(parameter)
         self.error = gui.add_markdown("")
 
-        panel = gui.add_panel()
+        first = next(_analyses(self.exercise.analyse(dict(self.values))))
+        self.panel = panel = gui.add_panel()
         with panel.add_tab("Scope", viser.Icon.WAVE_SINE):
             self.charts = [self._add_chart(chart) for chart in self.exercise.charts]
             self.readouts = gui.add_markdown("*computing …*")
         with panel.add_tab("Pole map", viser.Icon.CHART_DOTS):
-            self.pole_plot = self._add_pole_plot({})
+            data, options = self._pole_chart(first.poles)
+            self.pole_plot = gui.add_uplot(data, **options, aspect=1.3)
             gui.add_markdown("Poles in the s-plane (discrete poles mapped by s = ln z / T). "
                              "Right of the imaginary axis: unstable.")
             self.pole_table = gui.add_markdown("")
+        if first.plots:
+            with panel.add_tab("Analysis", viser.Icon.CHART_LINE):
+                self.plots = []
+                for plot in first.plots:
+                    data, options = self._plot_chart(plot)
+                    self.plots.append(gui.add_uplot(data, **options, aspect=2.0))
+        else:
+            self.plots = []
         with panel.add_tab("Worksheet", viser.Icon.NOTEBOOK):
             gui.add_markdown((STATIC / "worksheets" / self.exercise.worksheet).read_text(encoding="utf-8"))
         panel.dock_right()
@@ -101,7 +156,7 @@ class LabSession:
         handle.on_update(lambda _event, p=parameter, h=handle: self._on_input(p, h.value))
         return handle
 
-    def _add_chart(self, chart):
+    def _add_chart(self, chart: Chart):
         series = [viser.uplot.Series(label="time [ms]")]
         if chart.band:
             series += [viser.uplot.Series(label="+3σ", stroke="rgba(214,39,40,0.35)", width=1),
@@ -114,28 +169,36 @@ class LabSession:
             axes=(viser.uplot.Axis(label="time [ms]"), viser.uplot.Axis(label=f"{chart.title} [{chart.unit}]")),
             scales={"x": viser.uplot.Scale(time=False)}, aspect=3.2)
 
-    def _add_pole_plot(self, poles):
-        data, series = self._pole_data(poles)
-        return self.client.gui.add_uplot(
-            data, series, title="Poles [rad/s]", aspect=1.3,
-            scales={"x": viser.uplot.Scale(time=False)},
-            axes=(viser.uplot.Axis(label="Re s [rad/s]"), viser.uplot.Axis(label="Im s [rad/s]")))
+    @staticmethod
+    def _plot_chart(plot: Plot) -> tuple[tuple, dict]:
+        """uPlot arguments of a static analysis plot.  uPlot cannot range over
+        NaN gaps, so the y scale gets an explicit range from the finite data."""
+        x = np.asarray(plot.x, dtype=float)
+        ys = [np.asarray(y, dtype=float) for _, y, _ in plot.series]
+        series = (viser.uplot.Series(label=plot.x_label),) + tuple(
+            viser.uplot.Series(label=label, stroke=color, width=0,
+                               points=viser.uplot.Series_Points(show=True, size=8, fill=color, stroke=color))
+            if plot.points else
+            viser.uplot.Series(label=label, stroke=color, width=1.5, points=viser.uplot.Series_Points(show=False))
+            for label, _, color in plot.series)
+        return (x, *ys), {
+            "series": series, "title": plot.title,
+            "axes": (viser.uplot.Axis(label=plot.x_label), viser.uplot.Axis(label=plot.y_label)),
+            "scales": {"x": viser.uplot.Scale(time=False), "y": viser.uplot.Scale(auto=False, **_span(*ys))}}
 
     @staticmethod
-    def _pole_data(poles: dict[str, np.ndarray]):
-        """uPlot wants one shared, sorted x: merge all real parts, leave gaps (NaN)."""
-        names = list(POLE_COLORS)
-        points = [(p.real, p.imag, names.index(n)) for n, ps in poles.items() for p in ps]
-        points.sort()
+    def _pole_chart(poles: dict[str, np.ndarray]) -> tuple[tuple, dict]:
+        """The pole map as a scatter plot: one shared, sorted real axis, each
+        pole set a series with gaps where the other sets have their poles."""
+        points = sorted((p.real, p.imag, index) for index, ps in enumerate(poles.values()) for p in ps)
         x = np.array([p[0] for p in points]) if points else np.zeros(1)
-        columns = [np.full(len(x), np.nan) for _ in names]
+        columns = [np.full(len(x), np.nan) for _ in poles]
         for row, (_, imag, which) in enumerate(points):
             columns[which][row] = imag
-        series = (viser.uplot.Series(label="Re s [rad/s]"),) + tuple(
-            viser.uplot.Series(label=name, stroke=POLE_COLORS[name], width=0,
-                               points=viser.uplot.Series_Points(show=True, size=9, fill=POLE_COLORS[name]))
-            for name in names)
-        return (x, *columns), series
+        plot = Plot("Poles [rad/s]", "Re s [rad/s]", "Im s [rad/s]", x,
+                    tuple((name, column, POLE_COLORS[i % len(POLE_COLORS)])
+                          for i, (name, column) in enumerate(zip(poles, columns))), points=True)
+        return LabSession._plot_chart(plot)
 
     # -- events --------------------------------------------------------------------
     def _on_input(self, parameter: Parameter, shown) -> None:
@@ -153,7 +216,21 @@ class LabSession:
             if parameter.name == "seed":
                 self._reset()
             else:
-                self.simulation = self.simulation.retuned(self.exercise.simulation(self.values).setup)
+                self.simulation = self.exercise.retune(self.simulation, self.values)
+        if self.scene is not None:
+            self.scene.update(dict(self.values))
+        self._request_analysis()
+
+    def _on_upload(self, uploaded) -> None:
+        try:
+            data = self.exercise.load_data(uploaded.name, uploaded.content)
+        except ParameterError as error:
+            self.error.content = f"⚠️ {uploaded.name}: {error}"
+            return
+        self.error.content = f"Loaded {uploaded.name}."
+        with self.lock:
+            self.values["data"] = data
+            self._reset()
         self._request_analysis()
 
     def _on_button(self, which: str) -> None:
@@ -167,51 +244,57 @@ class LabSession:
         self.simulation = self.exercise.simulation(self.values)
         self.buffer = self.buffer[:0]
 
-    # -- analysis (readouts, pole map) -----------------------------------------
+    # -- analysis (readouts, pole map, plots) -----------------------------------
     def _request_analysis(self) -> None:
         self.analysis_version += 1
         threading.Thread(target=self._analyse, args=(self.analysis_version, dict(self.values)),
                          daemon=True).start()
 
     def _analyse(self, version: int, values: dict) -> None:
-        result = self.exercise.analyse(values)
-        if version != self.analysis_version or self.closed:
-            return                                    # a newer slider move supersedes this one
+        for result in _analyses(self.exercise.analyse(values)):
+            if version != self.analysis_version or self.stopped:
+                return                                # a newer slider move supersedes this one
+            self._show(result)
+
+    def _show(self, result: Analysis) -> None:
         lines = ["| quantity | value | unit |", "|---|---:|---|"]
         lines += [f"| {label} | {_format(value)} | {unit} |" for label, value, unit in result.readouts]
-        live = self._live_rms()
-        if live is not None:
-            lines.append(f"| RMS displacement, this run (scope window) | {live:.3g} | µm |")
+        with self.lock:
+            trace = {name: self.buffer[:, column] for name, column in self.columns.items()}
+        if len(self.buffer) >= 10:
+            lines += [f"| {label} (scope window) | {_format(value)} | {unit} |"
+                      for label, value, unit in self.exercise.live_readouts(trace)]
         self.readouts.content = "\n".join(lines) + "\n\n" + "\n\n".join(f"*{n}*" for n in result.notes)
-        data, _ = self._pole_data(result.poles)
-        self.pole_plot.data = data
+        data, options = self._pole_chart(result.poles)
+        self.pole_plot.data, self.pole_plot.scales = data, options["scales"]
         rows = ["| set | Re s [rad/s] | Im s [rad/s] | damping ζ |", "|---|---:|---:|---:|"]
         for name, poles in result.poles.items():
             for pole in sorted((p for p in poles if p.imag >= 0), key=lambda p: -p.real):
                 zeta = -pole.real / abs(pole) if abs(pole) > 0 else 1.0
                 rows.append(f"| {name} | {pole.real:.0f} | {pole.imag:.0f} | {zeta:.2f} |")
         self.pole_table.content = "\n".join(rows)
-
-    def _live_rms(self):
-        if len(self.buffer) < 10:
-            return None
-        return float(np.sqrt(np.mean(self.buffer[:, self.columns["x_true_m"]] ** 2)) * 1e6)
+        for handle, plot in zip(self.plots, result.plots):
+            data, options = self._plot_chart(plot)
+            handle.data, handle.scales = data, options["scales"]
 
     # -- simulation thread -------------------------------------------------------------
     def _run(self) -> None:
         carry, last = 0.0, time.perf_counter()
-        T = self.simulation.setup.rig.sample_time_s
-        window = int(SCOPE_WINDOW_S / T)
-        while not self.closed:
+        T = self.simulation.sample_time_s
+        while not self.stopped:
             time.sleep(FRAME_S)
             now = time.perf_counter()
             elapsed, last = now - last, now
+            if self.scene is not None:
+                self.scene.animate(now)
             with self.lock:
                 if not self.running:
                     continue
-                carry += self.values["time_scale"] * elapsed / T
+                time_scale = self.values.get("time_scale", 1.0)
+                carry += time_scale * elapsed / T
                 steps, carry = int(carry), carry - int(carry)
                 trace = self.simulation.advance(steps)
+                window = min(max(int(SCOPE_WINDOW_S * max(time_scale / 0.01, 1.0) / T), 2), SCOPE_ROWS)
                 self.buffer = np.concatenate([self.buffer, trace])[-window:]
                 message = self.simulation.status_message()
                 if message:
@@ -223,10 +306,11 @@ class LabSession:
                                              auto_close_seconds=10.0)
 
     def _draw(self) -> None:
-        if len(self.buffer) < 2:
+        with self.lock:
+            buffer = self.buffer
+        if len(buffer) < 2:
             return
-        step = max(1, len(self.buffer) // SCOPE_POINTS)
-        rows = self.buffer[::step]
+        rows = buffer[:: max(1, len(buffer) // SCOPE_POINTS)]
         t_ms = rows[:, 0] * 1e3
         for chart, handle in zip(self.exercise.charts, self.charts):
             columns = [t_ms]
@@ -237,6 +321,12 @@ class LabSession:
             columns += [rows[:, self.columns[s.column]] * s.scale for s in chart.series]
             handle.data = tuple(columns)
 
-    def close(self) -> None:
-        """Stop the simulation thread; the tab is gone."""
-        self.closed = True
+
+def _span(*arrays: np.ndarray) -> dict[str, float]:
+    """A plot range covering the finite values of ``arrays`` with a 5 % margin."""
+    finite = np.concatenate([a[np.isfinite(a)] for a in arrays]) if arrays else np.zeros(0)
+    if finite.size == 0:
+        return {"min": -1.0, "max": 1.0}
+    low, high = float(finite.min()), float(finite.max())
+    margin = 0.05 * (high - low) or 0.05 * max(abs(high), 1.0)
+    return {"min": low - margin, "max": high + margin}

@@ -24,13 +24,19 @@ from .estimators import STATE_SIZE, predict, update
 
 OK, DIVERGED, TOUCHDOWN = 0, 1, 2
 
-#: Columns of the trace array written by ``run``.
+#: Compiler options of the loop: no Python division checks (the divisions are
+#: by physical constants) and fast arithmetic that still honours NaN and inf,
+#: which the divergence check relies on.
+JIT = {"nogil": True, "cache": True, "error_model": "numpy",
+           "fastmath": {"nsz", "arcp", "contract", "afn", "reassoc"}}
+
+#: Columns of the trace array written by ``run`` after its time column [s].
 TRACE_COLUMNS = ("x_true_m", "x_measured_m", "x_estimated_m", "x_sigma_m",
                  "current_a", "current_reference_v", "velocity_true_m_per_s",
                  "velocity_estimated_m_per_s")
 
 
-@numba.njit(nogil=True, cache=True)
+@numba.njit(**JIT)
 def _nonlinear_derivative(s, u, f_z, p, ds):
     """Right-hand side of eq. 10-12 for s = (x, v, i, x_d); p = physical constants."""
     m, c_f, i0, delta0, cos_a, Ta, Ka, Tmx = p[0], p[1], p[2], p[3], p[4], p[5], p[6], p[7]
@@ -43,7 +49,7 @@ def _nonlinear_derivative(s, u, f_z, p, ds):
     ds[3] = (x - s[3]) / Tmx if Tmx > 0.0 else 0.0
 
 
-@numba.njit(nogil=True, cache=True)
+@numba.njit(**JIT)
 def _rk4_step(s, u, f_z, p, T, k1, k2, k3, k4, tmp):
     """Classical fourth-order Runge-Kutta over one sample, input held (ZOH)."""
     _nonlinear_derivative(s, u, f_z, p, k1)
@@ -60,15 +66,16 @@ def _rk4_step(s, u, f_z, p, T, k1, k2, k3, k4, tmp):
         s[j] += T / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j])
 
 
-@numba.njit(nogil=True, cache=True)
-def run(n_steps, plant, plant_A, plant_B_u, plant_B_f, nonlinear, physics,
+@numba.njit(**JIT)
+def run(n_steps, first_step, plant, plant_A, plant_B_u, plant_B_f, nonlinear, physics,
         x_hat, P, A_f, B_f, C_f, Q_f, R_diag,
         ctrl, Ac, Bc, Cc, Dc, u_limit, use_estimate,
         reference_m, disturbance_n, noise, noise_sigma, touchdown_m, trace):
     """Advance the closed loop by ``n_steps`` samples (see module docstring).
 
-    Parameters (all float64 arrays, modified in place where they hold state)
+    Parameters (float64 arrays unless said, modified in place where they hold state)
     ----------
+    first_step : index of the first sample (time = index * T).
     plant : (4,) true state (x [m], v [m/s], i [A], x_d [m]).
     plant_A, plant_B_u, plant_B_f : exact discrete linear plant (4x4, 4, 4);
         used when ``nonlinear`` is False.
@@ -80,10 +87,10 @@ def run(n_steps, plant, plant_A, plant_B_u, plant_B_f, nonlinear, physics,
     u_limit : amplifier input limit [V] (current limit / K_a).
     use_estimate : feed back K_mx x_hat[0] instead of the measured position.
     reference_m, disturbance_n : per-sample reference position [m] and force f_z [N].
-    noise : (n_steps, 4) standard normal draws; noise_sigma : (4,) their scales,
+    noise : (n_steps, 4) standard normal draws (float32 or float64); noise_sigma : (4,) their scales,
         (process v [m/s], process i [A], sensor x [V], sensor i [V]).
     touchdown_m : |x| at which the rotor touches down.
-    trace : (n_steps, 8) output, columns ``TRACE_COLUMNS``.
+    trace : (n_steps, 9) output: time [s], then the columns ``TRACE_COLUMNS``.
 
     Returns
     -------
@@ -116,14 +123,15 @@ def run(n_steps, plant, plant_A, plant_B_u, plant_B_f, nonlinear, physics,
             new_ctrl[r] = acc
         for r in range(n_c):
             ctrl[r] = new_ctrl[r]
-        trace[k, 0] = plant[0]
-        trace[k, 1] = y[0] / K_mx
-        trace[k, 2] = x_hat[0]
-        trace[k, 3] = np.sqrt(max(P[0, 0], 0.0))
-        trace[k, 4] = plant[2]
-        trace[k, 5] = u
-        trace[k, 6] = plant[1]
-        trace[k, 7] = x_hat[1]
+        trace[k, 0] = (first_step + k) * T
+        trace[k, 1] = plant[0]
+        trace[k, 2] = y[0] / K_mx
+        trace[k, 3] = x_hat[0]
+        trace[k, 4] = np.sqrt(max(P[0, 0], 0.0))
+        trace[k, 5] = plant[2]
+        trace[k, 6] = u
+        trace[k, 7] = plant[1]
+        trace[k, 8] = x_hat[1]
         # 5. filter prediction
         predict(x_hat, P, A_f, B_f, u, Q_f, work_x, work_P)
         # 6. plant

@@ -24,7 +24,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-_JIT = dict(nogil=True, cache=True, fastmath=True)
+_JIT = {"nogil": True, "cache": True, "fastmath": True}
 
 
 #: The compiled kernels work on exactly this many states, a compile-time

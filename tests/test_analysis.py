@@ -97,9 +97,9 @@ def test_noise_rms_matches_long_linear_simulation(use_estimate):
     axis = kalman_noise_setup(nonlinear=False, use_estimate=use_estimate)
     predicted = axis.noise_rms()
     sim = AxisSimulation(axis, seed=7)
-    trace = sim.advance(int(round(20.0 / T)))
+    trace = sim.advance(round(20.0 / T))
     assert sim.status == closed_loop.OK
-    trace = trace[int(round(0.1 / T)):]
+    trace = trace[round(0.1 / T):]
     columns = {"x_m": "x_true_m", "current_reference_v": "current_reference_v", "current_a": "current_a"}
     for output, column in columns.items():
         signal = trace[:, 1 + closed_loop.TRACE_COLUMNS.index(column)]

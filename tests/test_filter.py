@@ -132,7 +132,7 @@ def test_running_filter_converges_to_dare(sensor_lag_s):
     and its gain equal the DARE solution (1e-6 relative)."""
     axis = kalman_noise_setup(sensor_lag_s=sensor_lag_s, nonlinear=False)
     sim = AxisSimulation(axis, seed=2)
-    sim.advance(int(round(0.2 / T)))
+    sim.advance(round(0.2 / T))
     assert sim.status == closed_loop.OK
     A, _, C = model_matrices(axis)
     R = axis.filter_R

@@ -3,7 +3,9 @@ any of them generically (parameters, scope charts, pole map, readouts)."""
 
 from __future__ import annotations
 
+import importlib
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
@@ -30,6 +32,21 @@ class Chart:
     band: tuple[str, str] | None = None
 
 
+@dataclass(frozen=True)
+class Plot:
+    """A static x-y chart of the analysis (step response, pole paths, k_x over x ...).
+
+    ``series`` holds (label, y values, CSS colour); NaN in y is a gap.  Labels
+    carry units, e.g. ``"displacement x [µm]"``."""
+
+    title: str
+    x_label: str
+    y_label: str
+    x: np.ndarray
+    series: tuple[tuple[str, np.ndarray, str], ...]
+    points: bool = False                              # markers only (scatter)
+
+
 @dataclass
 class Analysis:
     """What the linear analysis says about the current settings."""
@@ -37,10 +54,41 @@ class Analysis:
     readouts: list[tuple[str, float, str]]           # (label, value, unit)
     poles: dict[str, np.ndarray]                      # name -> continuous-equivalent poles [rad/s]
     notes: list[str] = field(default_factory=list)
+    plots: list[Plot] = field(default_factory=list)
+
+
+class Simulation(Protocol):
+    """What the app needs of an exercise's time simulation."""
+
+    sample_time_s: float
+    columns: tuple[str, ...]                          # trace columns after the time column
+
+    def advance(self, n_steps: int) -> np.ndarray:
+        """Up to ``n_steps`` samples as rows (time [s], *columns); fewer once stopped."""
+
+    def status_message(self) -> str:
+        """'' while running; a sentence saying why it stopped (touchdown, divergence ...)."""
+
+
+class SceneView(Protocol):
+    """An optional 3D view of an exercise in the tab's viser scene."""
+
+    def attach(self, scene) -> None:
+        """Add the scene nodes once (``scene`` is the tab's ``viser.SceneApi``)."""
+
+    def update(self, values: dict) -> None:
+        """A parameter changed."""
+
+    def animate(self, wall_time_s: float) -> None:
+        """Called every display frame."""
 
 
 class Exercise:
-    """Base class: subclasses set the attributes and implement the methods."""
+    """Base class: subclasses set the attributes and implement the methods.
+
+    Every method takes the resolved parameter ``values``; an uploaded data set
+    (see ``data_description``) travels in ``values["data"]`` (None: the
+    exercise's shipped default)."""
 
     name: str
     title: str
@@ -48,9 +96,15 @@ class Exercise:
     parameters: tuple[Parameter, ...]
     charts: tuple[Chart, ...]
     default_duration_s: float = 1.0
+    data_description: str | None = None   # set: the exercise accepts an uploaded CSV
 
     def resolve(self, overrides: dict | None = None) -> dict:
-        return resolve(self.parameters, overrides)
+        overrides = dict(overrides or {})
+        data = overrides.pop("data", None)
+        values = resolve(self.parameters, overrides)
+        if self.data_description is not None:
+            values["data"] = data
+        return values
 
     def model(self, values: dict) -> dict:
         raise NotImplementedError
@@ -58,17 +112,38 @@ class Exercise:
     def analyse(self, values: dict) -> Analysis:
         raise NotImplementedError
 
-    def simulation(self, values: dict):
+    def simulation(self, values: dict) -> Simulation:
         raise NotImplementedError
+
+    def retune(self, simulation: Simulation, values: dict) -> Simulation:
+        """The simulation after a parameter change; by default a fresh one."""
+        return self.simulation(values)
 
     def metrics(self, values: dict, duration_s: float) -> dict:
         raise NotImplementedError
 
+    def live_readouts(self, trace: dict[str, np.ndarray]) -> list[tuple[str, float, str]]:
+        """Readouts from the scope's buffer (column name -> samples)."""
+        return []
+
+    def scene(self, values: dict) -> SceneView | None:
+        return None
+
+    def load_data(self, filename: str, content: bytes):
+        """Parse an uploaded file; raise ``ParameterError`` with one line naming the row or column."""
+        raise ParameterError(f"exercise {self.name!r} takes no data files")
+
+
+#: Exercise modules, in the order the lab lists them (each defines ``EXERCISE``).
+MODULES = (
+    "kalman_noise",
+)
+
 
 def registry() -> dict[str, Exercise]:
     """All exercises by name."""
-    from . import kalman_noise
-    return {e.name: e for e in (kalman_noise.EXERCISE,)}
+    exercises = (importlib.import_module(f"{__name__}.{module}").EXERCISE for module in MODULES)
+    return {e.name: e for e in exercises}
 
 
 def get(name: str) -> Exercise:
