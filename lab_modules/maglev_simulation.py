@@ -39,8 +39,8 @@ STATUS_TEXT = {
 #: no longer lift the ball with the currents of §3 (x3 ~ 2 A by eq. 2.14).
 MIN_GAP_M, MAX_GAP_M = 2e-3, 30e-3
 
-CONTROLLERS = ("feedback linearising", "lead-lag")
-FILTERS = ("continuous-discrete", "continuous-time (paper)", "continuous-time (R dt)")
+CONTROLLERS = ("linearising", "lead-lag")
+FILTERS = ("continuous-discrete", "continuous-time", "continuous-time-Rdt")
 
 TRACE_COLUMNS = (
     "reference_m", "x_true_m", "x_measured_m", "x_estimated_m", "x_sigma_m",
@@ -142,7 +142,7 @@ class MaglevSetup:
 
     plant: MaglevPlant = TABLE_3_1
     poles_rad_per_s: tuple[float, float, float] = (-60.0, -80.0, -100.0)
-    controller: str = "feedback linearising"
+    controller: str = "linearising"
     lead_lag: LeadLag = LEAD_LAG
     filter: str = "continuous-discrete"
     filter_Q: np.ndarray = field(default_factory=table_3_1_q)

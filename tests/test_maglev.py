@@ -243,8 +243,8 @@ def test_paper_continuous_time_filter_misjudges_its_error():
     continuous-discrete filter.  With the hardware's 0.0034 mm sensor it diverges."""
     base = {"initial_covariance": 1e-5}
     _, cd = run(**base)
-    _, paper = run(filter="continuous-time (paper)", **base)
-    _, fixed = run(filter="continuous-time (R dt)", initial_covariance=1e-7)
+    _, paper = run(filter="continuous-time", **base)
+    _, fixed = run(filter="continuous-time-Rdt", initial_covariance=1e-7)
     after = cd["time_s"] > 0.25
 
     def overstatement(trace):
@@ -252,7 +252,7 @@ def test_paper_continuous_time_filter_misjudges_its_error():
 
     assert overstatement(paper) > 10 * overstatement(cd)
     assert overstatement(fixed) == pytest.approx(overstatement(cd), rel=0.2)
-    sim, _ = run(filter="continuous-time (paper)", sensor_noise_m=3.4e-6, **base)
+    sim, _ = run(filter="continuous-time", sensor_noise_m=3.4e-6, **base)
     assert "diverged" in sim.status_message() or "struck" in sim.status_message()
 
 

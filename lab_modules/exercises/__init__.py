@@ -137,6 +137,8 @@ class Exercise:
 #: Exercise modules, in the order the lab lists them (each defines ``EXERCISE``).
 MODULES = (
     "kalman_noise",
+    "maglev_tracking",
+    "maglev_tuning",
 )
 
 
