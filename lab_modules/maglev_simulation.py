@@ -138,9 +138,13 @@ def hardware_q() -> np.ndarray:
 
 @dataclass(frozen=True)
 class MaglevSetup:
-    """Everything one maglev experiment needs (SI units; Table 3.1 defaults)."""
+    """Everything one maglev experiment needs (SI units; Table 3.1 defaults).
+
+    ``plant`` is the model the filter and the controller use; ``true_plant``
+    (default: the same) is the simulated ball and coil."""
 
     plant: MaglevPlant = TABLE_3_1
+    true_plant: MaglevPlant | None = None
     poles_rad_per_s: tuple[float, float, float] = (-60.0, -80.0, -100.0)
     controller: str = "linearising"
     lead_lag: LeadLag = LEAD_LAG
@@ -163,9 +167,11 @@ class MaglevSetup:
 
 
 @numba.njit(nogil=True, cache=True)
-def run(n_steps, t0, x, x_hat, P, xc, refs, noise, p, k, Q, plant_q, r, dt, controller, filter_kind,
+def run(n_steps, t0, x, x_hat, P, xc, refs, noise, p_true, p, k, Q, plant_q, r, dt, controller, filter_kind,
         substeps, Ac, Bc, Cc, Dc, u0, trace):
-    """Advance the loop by up to n_steps samples (module docstring); returns (steps done, status)."""
+    """Advance the loop by up to n_steps samples (module docstring); returns (steps done, status).
+
+    ``p_true`` are the plant's constants, ``p`` the model's (filter and controller)."""
     gain = np.empty(3)
     x_next = np.empty(3)
     sigma = np.sqrt(r)
@@ -199,7 +205,7 @@ def run(n_steps, t0, x, x_hat, P, xc, refs, noise, p, k, Q, plant_q, r, dt, cont
         row[9], row[10], row[11] = x[2], x_hat[2], u
         row[12], row[13], row[14] = x[0] - x_hat[0], x[1] - x_hat[1], 0.0
         row[15], row[16], row[17] = innovation, innovation * innovation / s, 1.0 if guarded else 0.0
-        rk4_step(x, u, p, dt, x_next)
+        rk4_step(x, u, p_true, dt, x_next)
         x[0] = x_next[0]
         x[1] = x_next[1] + sq_v * noise[step, 1]
         x[2] = x_next[2] + sq_i * noise[step, 2]
@@ -230,6 +236,7 @@ class MaglevSimulation:
         self.x_hat = np.array(setup.initial_estimate, dtype=float)
         self.P = setup.initial_covariance * np.eye(3)
         self.constants = setup.plant.constants()
+        self.true_constants = (setup.true_plant or setup.plant).constants()
         self.k = setup.gain
         discrete = setup.lead_lag.discrete(self.sample_time_s)
         self.lead_lag = tuple(np.ascontiguousarray(np.atleast_2d(np.asarray(M, dtype=float)))
@@ -248,7 +255,7 @@ class MaglevSimulation:
         trace = np.empty((n_steps, 1 + len(TRACE_COLUMNS)))
         done, self.status = run(
             n_steps, self.steps * self.sample_time_s, self.x, self.x_hat, self.P, self.xc, refs, noise,
-            self.constants, self.k, np.asarray(s.filter_Q, dtype=float), np.diag(s.plant_Q).astype(float),
+            self.true_constants, self.constants, self.k, np.asarray(s.filter_Q, dtype=float), np.diag(s.plant_Q).astype(float),
             s.sensor_noise_m**2, self.sample_time_s, CONTROLLERS.index(s.controller),
             FILTERS.index(s.filter), s.filter_substeps, *self.lead_lag, self.u0, trace)
         self.steps += done
