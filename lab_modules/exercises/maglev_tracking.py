@@ -95,7 +95,7 @@ PARAMETERS = (
       -5.0, 5.0, "Estimate minus plant at t = 0 (Table 3.1: 14.367 - 14.8 mm).", step=0.001,
       group="Kalman filter"),
     P("initial_current_error_percent", "Initial current error", "%", round(PAPER_CURRENT_ERROR_PERCENT, 2),
-      -50.0, 50.0, "Estimate relative to the plant's current at t = 0 (Table 3.1: +5 %).", step=0.1,
+      -99.0, 100.0, "Estimate relative to the plant's current at t = 0 (Table 3.1: +5 %).", step=0.1,
       group="Kalman filter"),
     P("sensor_noise_mm", "Sensor noise σ", "mm", 1.0, 1e-4, 3.0,
       "Position sensor noise (Table 3.1: 1 mm in simulation; Table 3.2: 0.0034 mm on the hardware).",
