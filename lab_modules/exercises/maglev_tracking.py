@@ -168,20 +168,20 @@ class MaglevTracking(Exercise):
     parameters = PARAMETERS
     default_duration_s = 1.5
     charts = (
-        Chart("Ball position (gap below the coil)", "mm", (
+        Chart("Gap x1", "mm", (
             Series("measured", "x_measured_m", 1e3, "#c0c0c0"),
             Series("reference", "reference_m", 1e3, "#000000"),
             Series("true", "x_true_m", 1e3, "#1f77b4"),
             Series("estimated", "x_estimated_m", 1e3, "#d62728"))),
-        Chart("Position estimation error x1 - x̂1 with ±3σ", "mm", (
+        Chart("Position error ±3σ", "mm", (
             Series("error", "position_error_m", 1e3, "#d62728"),), band=("zero", "x_sigma_m")),
-        Chart("Velocity estimation error x2 - x̂2 with ±3σ", "mm/s", (
+        Chart("Velocity error ±3σ", "mm/s", (
             Series("error", "velocity_error_m_per_s", 1e3, "#9467bd"),),
             band=("zero", "velocity_sigma_m_per_s")),
         Chart("Coil current", "A", (
             Series("true", "current_true_a", 1.0, "#1f77b4"),
             Series("estimated", "current_estimated_a", 1.0, "#2ca02c"))),
-        Chart("Coil voltage u", "V", (Series("u", "coil_voltage_v", 1.0, "#ff7f0e"),)),
+        Chart("Coil voltage", "V", (Series("u", "coil_voltage_v", 1.0, "#ff7f0e"),)),
     )
 
     def model(self, values: dict) -> dict:
