@@ -9,7 +9,7 @@ import scipy.integrate
 import scipy.linalg
 from filterpy.kalman import ExtendedKalmanFilter
 
-from lab_modules.continuous_discrete_ekf import ContinuousDiscreteEKF
+from lab_modules.continuous_discrete_ekf import ContinuousDiscreteEKF, ContinuousTimeEKF
 from lab_modules.maglev import (
     LEAD_LAG,
     TABLE_3_1,
@@ -218,6 +218,7 @@ def test_estimation_errors_inside_3_sigma(kind, plant_noise):
     for seed in range(2):
         sim, trace = run(seed=seed, reference=reference, plant_Q=plant_Q)
         assert sim.status_message() == ""
+        assert np.array_equal(sim.P, sim.P.T) and np.linalg.eigvalsh(sim.P).min() > 0.0
         after = trace["time_s"] > 0.25
         for error, sigma in (("position_error_m", "x_sigma_m"), ("velocity_error_m_per_s",
                                                                    "velocity_sigma_m_per_s")):
@@ -281,3 +282,28 @@ def test_static_offset_from_a_coil_resistance_mismatch():
     assert abs(offsets[0]) < 5e-6
     assert 0.05e-3 < offsets[1] < 0.15e-3
     assert offsets[2] == pytest.approx(2 * offsets[1], rel=0.05)
+
+
+def test_continuous_time_filter_with_sample_density_approaches_continuous_discrete():
+    """On the same noisy samples of a resting ball, the Kalman-Bucy filter with R_c = R dt ends
+    within a fraction of sigma of the continuous-discrete filter and with a similar covariance;
+    with the paper's R_c = R it trusts the samples so little that its variance stays far larger."""
+    rng = np.random.default_rng(4)
+    dt, r = 1e-3, (1e-4) ** 2
+    start = X_EQ + np.array([2e-5, 0.0, 0.0])
+    P0 = np.diag([1e-10, 1e-6, 1e-8])      # P11 dt / R_c < 2.8: inside RK4's stability for R_c = R dt
+    Q = np.diag([0.0, 1e-4, 1e-8])
+    cd = ContinuousDiscreteEKF(Q, r, start, P0)
+    bucy = ContinuousTimeEKF(Q, r, start, P0, density_from_samples=True)
+    paper = ContinuousTimeEKF(Q, r, start, P0)
+    u = TABLE_3_1.equilibrium_voltage_v(0.0148)
+    for _ in range(300):
+        z = X_EQ[0] + np.sqrt(r) * rng.standard_normal()
+        cd.update(z)
+        cd.predict(u, dt)
+        bucy.propagate(u, z, dt)
+        paper.propagate(u, z, dt)
+    sigma = np.sqrt(cd.P[0, 0])
+    assert abs(bucy.x[0] - cd.x[0]) < 0.5 * sigma
+    assert bucy.P[0, 0] == pytest.approx(cd.P[0, 0], rel=0.3)
+    assert paper.P[0, 0] > 100 * cd.P[0, 0]
