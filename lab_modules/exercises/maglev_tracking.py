@@ -212,7 +212,7 @@ class MaglevTracking(Exercise):
         ]
         chain = brunovsky_chain()
         closed_chain = control.ss(chain.A - chain.B @ k[None, :], chain.B * k[0], chain.C, 0.0)
-        t = np.linspace(0.0, 0.25, 251)
+        t = np.linspace(0.0, 0.5, 501)
         _, step = control.step_response(closed_chain, T=t)
         w = values["prefilter_bandwidth_rad_s"]
         tf_s = control.tf("s")
