@@ -5,7 +5,10 @@ Reports, from one run:
 * its speed against the same loop written in Python with filterpy's
   ``KalmanFilter.predict/update`` (same seed and noise), and the largest
   relative difference between the two loops' estimates;
-* the aggregate speed of two simulations on two threads against one.
+* the aggregate speed of two simulations on two threads against one, and the
+  CPU time per wall time of that run (near 2 when the loops run in parallel);
+* for every exercise, its simulation's speed and the share of one core a tab
+  takes at the exercise's default time scale (for sizing a classroom server).
 """
 
 from __future__ import annotations
@@ -18,7 +21,7 @@ import numpy as np
 from filterpy.kalman import KalmanFilter as FilterpyKalman
 
 from lab_modules import closed_loop
-from lab_modules.exercises import get
+from lab_modules.exercises import get, registry
 
 
 def _simulation(use_estimate: bool = True, seed: int = 0):
@@ -67,24 +70,30 @@ def filterpy_loop(sim, n_steps: int) -> np.ndarray:
     return estimates
 
 
-def _throughput(seconds: float, threads: int) -> float:
-    """Simulated seconds per wall second, summed over ``threads`` parallel simulations."""
+def _throughput(seconds: float, threads: int, repeats: int = 3) -> tuple[float, float]:
+    """Simulated seconds per wall second, summed over ``threads`` parallel
+    simulations (best of ``repeats``), and the process's CPU time per wall
+    time in that run (about ``threads`` when the loops really run in parallel)."""
     sims = [_simulation(seed=s) for s in range(threads)]
     for sim in sims:
         sim.advance(100)                                   # compile / warm up
-    n_steps = int(seconds / sims[0].setup.rig.sample_time_s)
-    workers = [threading.Thread(target=sim.advance, args=(n_steps,)) for sim in sims]
-    start = time.perf_counter()
-    for w in workers:
-        w.start()
-    for w in workers:
-        w.join()
-    return threads * seconds / (time.perf_counter() - start)
+    n_steps = int(seconds / sims[0].sample_time_s)
+    best = (0.0, 0.0)
+    for _ in range(repeats):
+        workers = [threading.Thread(target=sim.advance, args=(n_steps,)) for sim in sims]
+        cpu, start = time.process_time(), time.perf_counter()
+        for w in workers:
+            w.start()
+        for w in workers:
+            w.join()
+        wall = time.perf_counter() - start
+        best = max(best, (threads * seconds / wall, (time.process_time() - cpu) / wall))
+    return best
 
 
 def run(seconds: float = 2.0) -> dict:
-    single = _throughput(seconds, 1)
-    parallel = _throughput(seconds, 2)
+    single, _ = _throughput(seconds, 1)
+    parallel, cpu_per_wall = _throughput(seconds, 2)
     n_ref = 4000
     reference_sim, compiled_sim = _simulation(seed=7), _simulation(seed=7)
     start = time.perf_counter()
@@ -97,6 +106,7 @@ def run(seconds: float = 2.0) -> dict:
         "realtime_factor_one_core": single,
         "realtime_factor_two_threads": parallel,
         "parallel_speedup_two_threads": parallel / single,
+        "cpu_time_per_wall_time_two_threads": cpu_per_wall,
         "realtime_factor_filterpy_loop": filterpy_speed,
         "speedup_vs_filterpy_loop": single / filterpy_speed,
         "max_relative_estimate_difference_vs_filterpy": float(np.max(np.abs(compiled - reference)) / scale),
@@ -104,8 +114,32 @@ def run(seconds: float = 2.0) -> dict:
     }
 
 
+def classroom_load(seconds: float = 0.5) -> dict:
+    """Per exercise: simulated seconds per wall second of its browser simulation
+    (best of three), and the share of one core one tab needs at the default
+    time scale (0.01 = a hundred tabs per core)."""
+    load = {}
+    for name, exercise in registry().items():
+        values = exercise.resolve({})
+        simulation = exercise.simulation(values)
+        simulation.advance(10)                              # compile / warm up
+        n_steps = max(int(seconds / simulation.sample_time_s), 1)
+        speed = 0.0
+        for _ in range(3):
+            start = time.perf_counter()
+            done = len(simulation.advance(n_steps))
+            if done == 0:
+                break
+            speed = max(speed, done * simulation.sample_time_s / (time.perf_counter() - start))
+        time_scale = values.get("time_scale", 1.0)
+        load[name] = {"realtime_factor": speed, "default_time_scale": time_scale,
+                      "core_share_per_tab": time_scale / speed if speed else float("nan")}
+    return load
+
+
 def main(seconds: float = 2.0, as_json: bool = False) -> int:
     result = run(seconds)
+    result["classroom_load"] = classroom_load()
     if as_json:
         print(json.dumps(result, indent=2))
     else:

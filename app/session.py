@@ -211,15 +211,16 @@ class LabSession:
         self.error.content = ""
         with self.lock:
             self.values[parameter.name] = value
-            if parameter.name == "time_scale":
-                return
+        if parameter.name == "time_scale":
+            return
+        self._request_analysis()                      # readouts first: they are what the student watches
+        with self.lock:
             if parameter.name == "seed":
                 self._reset()
             else:
                 self.simulation = self.exercise.retune(self.simulation, self.values)
         if self.scene is not None:
             self.scene.update(dict(self.values))
-        self._request_analysis()
 
     def _on_upload(self, uploaded) -> None:
         try:
@@ -265,6 +266,7 @@ class LabSession:
             lines += [f"| {label} (scope window) | {_format(value)} | {unit} |"
                       for label, value, unit in self.exercise.live_readouts(trace)]
         self.readouts.content = "\n".join(lines) + "\n\n" + "\n\n".join(f"*{n}*" for n in result.notes)
+        self.client.flush()                           # the readouts go out now, not with the next window
         data, options = self._pole_chart(result.poles)
         self.pole_plot.data, self.pole_plot.scales = data, options["scales"]
         rows = ["| set | Re s [rad/s] | Im s [rad/s] | damping ζ |", "|---|---:|---:|---:|"]

@@ -20,6 +20,7 @@ Values the paper leaves out:
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import control
@@ -112,6 +113,7 @@ class BearingAxis:
             A[3, 0], A[3, 3] = 1.0 / sensor_lag_s, -1.0 / sensor_lag_s
         return control.ss(A, B, C, np.zeros((2, 2)))
 
+    @functools.lru_cache(maxsize=64)  # noqa: B019 (RIG lives as long as the process) sliders revisit lags; do not mutate
     def discrete_model(self, sensor_lag_s: float = 0.0) -> control.StateSpace:
         """Zero-order-hold discretisation at T = 50 µs: the A, B, C of eq. 1."""
         return control.c2d(self.continuous_model(sensor_lag_s), self.sample_time_s, method="zoh")

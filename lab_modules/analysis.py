@@ -42,14 +42,18 @@ class Loop:
 
 
 def closed_loop(model: control.StateSpace, controller: control.StateSpace,
-                kalman_gain: np.ndarray, use_estimate: bool) -> Loop:
+                kalman_gain: np.ndarray, use_estimate: bool,
+                state_gain: np.ndarray | None = None) -> Loop:
     """Assemble plant, controller and steady-state filter into one discrete system.
 
     State z = (plant s, controller x_c, filter prediction x_p).  With
     y = C s + eta and x_hat = x_p + K (y - C x_p), the fed-back position is
-    the measurement K_mx x_d + eta_x or the estimate K_mx x_hat[0].  With
-    measured feedback the filter only watches, so its states are excluded from
-    ``loop_states`` (and from the loop's poles).
+    the measurement K_mx x_d + eta_x or the estimate K_mx x_hat[0], and
+
+        u = C_c x_c + D_c e - K_s x_hat,   e = K_mx r - fed-back position.
+
+    With measured feedback and no state gain the filter only watches, so its
+    states are excluded from ``loop_states`` (and from the loop's poles).
 
     Parameters
     ----------
@@ -61,6 +65,8 @@ def closed_loop(model: control.StateSpace, controller: control.StateSpace,
         Steady-state correction gain K of eq. 2.
     use_estimate : bool
         Feed back the estimated instead of the measured position.
+    state_gain : ndarray, optional
+        K_s on the filter's state estimate (LQG, paper §IV); None: no state feedback.
     """
     A, B, C = (np.asarray(M) for M in (model.A, model.B, model.C))
     Ac, Bc, Cc, Dc = (np.atleast_2d(np.asarray(M)) for M in
@@ -77,29 +83,33 @@ def closed_loop(model: control.StateSpace, controller: control.StateSpace,
         Fs, Fp, Fn = h @ K @ C, h @ (I - K @ C), h @ K
     else:
         Fs, Fp, Fn = C[:1], np.zeros((1, n)), np.array([[1.0, 0.0]])
+    Ks = np.zeros((1, n)) if state_gain is None else np.reshape(state_gain, (1, n))
+    # u = Us s + Cc x_c + Up x_p + Un eta + Dc K_mx r
+    Us, Up, Un = -Dc @ Fs - Ks @ K @ C, -Dc @ Fp - Ks @ (I - K @ C), -Dc @ Fn - Ks @ K
     G = np.zeros((n, 2))
     G[1, 0], G[2, 1] = 1.0, 1.0      # process noise on v and i (eq. 17's structure)
     Acl = np.block([
-        [A - Bu @ Dc @ Fs, Bu @ Cc, -Bu @ Dc @ Fp],
+        [A + Bu @ Us, Bu @ Cc, Bu @ Up],
         [-Bc @ Fs, Ac, -Bc @ Fp],
-        [A @ K @ C - Bu @ Dc @ Fs, Bu @ Cc, A @ (I - K @ C) - Bu @ Dc @ Fp],
+        [A @ K @ C + Bu @ Us, Bu @ Cc, A @ (I - K @ C) + Bu @ Up],
     ])
     reference = np.vstack([Bu @ Dc, Bc, Bu @ Dc]) * k_mx          # input in metres
     disturbance = np.vstack([Bf, np.zeros((nc, 1)), np.zeros((n, 1))])
     process = np.vstack([G, np.zeros((nc, 2)), np.zeros((n, 2))])
-    sensor = np.vstack([-Bu @ Dc @ Fn, -Bc @ Fn, A @ K - Bu @ Dc @ Fn])
+    sensor = np.vstack([Bu @ Un, -Bc @ Fn, A @ K + Bu @ Un])
     Bcl = np.hstack([reference, disturbance, process, sensor])
     x_row = np.zeros((1, 2 * n + nc))
     x_row[0, 0] = 1.0
     current_row = np.zeros((1, 2 * n + nc))
     current_row[0, 2] = 1.0
-    u_row = np.hstack([-Dc @ Fs, Cc, -Dc @ Fp])
+    u_row = np.hstack([Us, Cc, Up])
     Ccl = np.vstack([x_row, u_row, current_row])
     Dcl = np.zeros((3, Bcl.shape[1]))
-    Dcl[1] = np.hstack([Dc[0] * k_mx, [0.0, 0.0, 0.0], (-Dc @ Fn)[0]])
+    Dcl[1] = np.hstack([Dc[0] * k_mx, [0.0, 0.0, 0.0], Un[0]])
     system = control.ss(Acl, Bcl, Ccl, Dcl, model.dt,
                         inputs=LOOP_INPUTS, outputs=LOOP_OUTPUTS)
-    loop_states = slice(0, 2 * n + nc) if use_estimate else slice(0, n + nc)
+    filter_in_loop = use_estimate or state_gain is not None
+    loop_states = slice(0, 2 * n + nc) if filter_in_loop else slice(0, n + nc)
     return Loop(system, loop_states)
 
 

@@ -16,7 +16,7 @@ import numpy as np
 
 from . import analysis, closed_loop
 from .amb_axis import RIG, BearingAxis
-from .estimators import KalmanFilter
+from .estimators import KalmanFilter, pad_vector
 
 
 @dataclass(frozen=True)
@@ -30,6 +30,7 @@ class AxisSetup:
 
     controller: control.StateSpace
     use_estimate: bool = False
+    state_gain: tuple[float, float, float] | None = None   # K on the estimate (x, v, i), LQG (eq. 22)
     nonlinear: bool = True
     sensor_lag_s: float = 0.0
     sensor_noise_m: float = 1.33e-6
@@ -85,12 +86,24 @@ class AxisSetup:
         """(K, P) of eq. 2 in steady state."""
         return analysis.steady_state_kalman(self.model, self.filter_Q, self.filter_R)
 
+    @property
+    def state_feedback_gain(self) -> np.ndarray | None:
+        """``state_gain`` on the filter's whole state; zero on x_d, whose place
+        the undelayed estimate of x takes for control (paper §III-B)."""
+        if self.state_gain is None:
+            return None
+        gain = np.zeros(self.model.nstates)
+        gain[:3] = self.state_gain
+        return gain
+
     # -- linear analysis -------------------------------------------------------
     def loop(self, use_estimate: bool | None = None, gain_factor: float = 1.0) -> analysis.Loop:
         """The closed loop (steady-state filter) with the controller scaled by ``gain_factor``."""
         use_estimate = self.use_estimate if use_estimate is None else use_estimate
+        state_gain = self.state_feedback_gain
         return analysis.closed_loop(self.model, gain_factor * self.controller,
-                                    self.steady_state_filter[0], use_estimate)
+                                    self.steady_state_filter[0], use_estimate,
+                                    None if state_gain is None else gain_factor * state_gain)
 
     def noise_rms(self, use_estimate: bool | None = None, gain_factor: float = 1.0) -> dict:
         """Steady-state RMS of x [m], i_ref [V] and i [A] driven by the plant's and sensors' noise."""
@@ -129,6 +142,7 @@ class AxisSimulation:
         self._ctrl_matrices = tuple(np.ascontiguousarray(np.atleast_2d(np.asarray(M, dtype=float)))
                                     for M in (controller.A, controller.B, controller.C, controller.D))
         self.ctrl = np.zeros(self._ctrl_matrices[0].shape[0])
+        self._state_gain = pad_vector(np.zeros(0) if setup.state_gain is None else setup.state_gain)
         self._plant_linear = self._padded_plant(A, B)
         self._physics = np.array([rig.equivalent_mass_kg, rig.force_factor_n_m2_per_a2, rig.i0_a,
                                   rig.delta0_m, np.cos(rig.pole_angle_rad), rig.amplifier_lag_s,
@@ -188,7 +202,7 @@ class AxisSimulation:
         status, done = closed_loop.run(
             n_steps, self.step, self.plant, *self._plant_linear, self.setup.nonlinear, self._physics,
             kf._x, kf.P, kf.A, kf.B, kf.C, kf.Q, kf.R_diag,
-            self.ctrl, *self._ctrl_matrices, self._u_limit, self.setup.use_estimate,
+            self.ctrl, *self._ctrl_matrices, self._state_gain, self._u_limit, self.setup.use_estimate,
             reference, disturbance, noise, self.setup.noise_sigma, self.setup.rig.touchdown_m, trace)
         self.step += done
         self.status = status

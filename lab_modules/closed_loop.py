@@ -1,12 +1,14 @@
 """The compiled closed loop of one bearing axis: plant, sensors, amplifier,
-Kalman filter and a linear controller, stepped at T = 50 µs.
+Kalman filter and a linear controller with optional state feedback on the
+filter's estimate (LQG, paper §IV), stepped at T = 50 µs.
 
 One call of ``run`` advances the loop by ``n_steps`` samples.  Per sample k:
 
 1. sensors   y = (K_mx x_d + eta_x, K_mi i + eta_i)            (eq. 1, 14)
 2. filter    correction with y                                   (eq. 2)
 3. feedback  measured K_mx x_d + eta_x, or estimated K_mx x_hat  (paper §II, Fig. 3)
-4. control   e = K_mx r - feedback;  i_ref = controller(e), clipped at the amplifier limit
+4. control   e = K_mx r - feedback;  i_ref = controller(e) - K_s x_hat (eq. 22; K_s = 0
+             for a PID), clipped at the amplifier limit
 5. filter    prediction with i_ref                               (eq. 2)
 6. plant     one sample of eq. 3-4 (linear) or eq. 10-12 (nonlinear, RK4),
              plus process noise on v and i and the disturbance force f_z
@@ -69,7 +71,7 @@ def _rk4_step(s, u, f_z, p, T, k1, k2, k3, k4, tmp):
 @numba.njit(**JIT)
 def run(n_steps, first_step, plant, plant_A, plant_B_u, plant_B_f, nonlinear, physics,
         x_hat, P, A_f, B_f, C_f, Q_f, R_diag,
-        ctrl, Ac, Bc, Cc, Dc, u_limit, use_estimate,
+        ctrl, Ac, Bc, Cc, Dc, state_gain, u_limit, use_estimate,
         reference_m, disturbance_n, noise, noise_sigma, touchdown_m, trace):
     """Advance the closed loop by ``n_steps`` samples (see module docstring).
 
@@ -84,6 +86,7 @@ def run(n_steps, first_step, plant, plant_A, plant_B_u, plant_B_f, nonlinear, ph
     x_hat, P, A_f, B_f, C_f, Q_f, R_diag : the filter's estimate, covariance
         and model (eq. 1, 2), padded to ``STATE_SIZE`` states (``KalmanFilter``).
     ctrl, Ac, Bc, Cc, Dc : controller state and discrete matrices (e [V] -> i_ref [V]).
+    state_gain : (STATE_SIZE,) K_s on the corrected estimate x_hat [V per state unit].
     u_limit : amplifier input limit [V] (current limit / K_a).
     use_estimate : feed back K_mx x_hat[0] instead of the measured position.
     reference_m, disturbance_n : per-sample reference position [m] and force f_z [N].
@@ -115,6 +118,8 @@ def run(n_steps, first_step, plant, plant_A, plant_B_u, plant_B_f, nonlinear, ph
         u = Dc[0, 0] * e
         for r in range(n_c):
             u += Cc[0, r] * ctrl[r]
+        for j in range(STATE_SIZE):
+            u -= state_gain[j] * x_hat[j]
         u = min(max(u, -u_limit), u_limit)
         for r in range(n_c):
             acc = Bc[r, 0] * e

@@ -137,6 +137,10 @@ class Exercise:
 #: Exercise modules, in the order the lab lists them (each defines ``EXERCISE``).
 MODULES = (
     "kalman_noise",
+    "ekf_parameters",
+    "ekf_disturbance",
+    "lqg_vs_pid",
+    "sensor_placement",
     "maglev_tracking",
     "maglev_tuning",
 )

@@ -1,0 +1,334 @@
+"""The bearing axis in closed loop with an extended Kalman filter (paper 000, §III).
+
+One call of the compiled ``run`` advances the loop by ``n_steps`` samples of
+T = 50 µs.  Per sample k:
+
+1. sensors    y = (K_mx x_d + eta_x, K_mi i + eta_i)                      (eq. 14, 16)
+2. filter     correction with y                                          (eq. 6)
+3. feedback   measured K_mx x_d + eta_x, or the estimate K_mx x_hat      (§III-B: the undelayed estimate)
+4. control    e = K_mx r - feedback;  i_ref = PID(e) + feedforward, clipped at the amplifier limit
+              feedforward (§III-B, after Fig. 4) = -f_z_hat / (k_i K_a): the estimated force
+              turned into the current that cancels it, through the rated k_i
+5. filter     prediction with i_ref                                      (eq. 6, 15)
+6. plant      one RK4 sample of eq. 10-12 (``closed_loop._rk4_step``) with the disturbance
+              force f_z, plus process noise on v and i
+
+The plant is always the nonlinear one of eq. 10-12; the filter is either
+``extended_filters.ParameterEKF``'s model (§III-A) or ``DisturbanceEKF``'s (§III-B).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from functools import lru_cache
+
+import control
+import numba
+import numpy as np
+from scipy.signal import max_len_seq
+
+from . import extended_filters as ef
+from .amb_axis import RIG, BearingAxis
+from .closed_loop import _rk4_step
+from .controllers import pid
+from .extended_filters import N_STATES
+
+OK, DIVERGED, TOUCHDOWN, FILTER_DIVERGED = 0, 1, 2, 3
+
+#: Columns of the trace written by ``run``.  ``*_true_*`` are the plant's:
+#: k_x, k_i the analytic derivatives of eq. 10 at the true (x, i).  The
+#: estimated factors are states 4-5 of ``ParameterEKF`` or, for
+#: ``DisturbanceEKF``, read from Phi by eq. 18 (no sigma: NaN); the force
+#: estimate exists only in ``DisturbanceEKF`` (NaN otherwise).
+TRACE_COLUMNS = ("x_true_m", "x_measured_m", "x_estimated_m", "x_sigma_m", "current_a",
+                 "current_reference_v", "reference_m", "force_true_n", "force_estimated_n",
+                 "force_sigma_n", "kx_true_n_per_m", "kx_estimated_n_per_m", "kx_sigma_n_per_m",
+                 "ki_true_n_per_a", "ki_estimated_n_per_a", "ki_sigma_n_per_a", "nis")
+
+
+@numba.njit(nogil=True, cache=True)
+def run(n_steps, model, plant, plant_physics, x_hat, P, Q, R_diag, C, filter_physics,
+        ctrl, Ac, Bc, Cc, Dc, u_limit, use_estimate, feedforward_v_per_n,
+        reference_m, disturbance_n, noise, noise_sigma, touchdown_m, trace):
+    """Advance the loop by ``n_steps`` samples (see module docstring).
+
+    plant : (4,) true (x [m], v [m/s], i [A], x_d [m]), in place.
+    plant_physics, filter_physics : ``extended_filters.physics_vector`` of the
+        plant and of the filter (they differ in T_mx when the filter's lag is wrong).
+    x_hat, P, Q, R_diag, C : the filter's estimate, covariance and model (in place).
+    ctrl, Ac, Bc, Cc, Dc : PID state and discrete matrices (e [V] -> i_ref [V]).
+    u_limit : amplifier input limit [V] (current limit / K_a).
+    feedforward_v_per_n : i_ref per estimated newton (0: no feedforward).
+    reference_m, disturbance_n : (n_steps,) reference position [m], force f_z [N].
+    noise : (n_steps, 4) standard normal draws scaled by noise_sigma =
+        (v [m/s], i [A], sensor x [V], sensor i [V]) per sample.
+    trace : (n_steps, len(TRACE_COLUMNS)) output.
+
+    Returns (status, steps_done).
+    """
+    n_c = ctrl.shape[0]
+    T, Tmx, K_mx, K_mi = plant_physics[8], plant_physics[7], plant_physics[9], plant_physics[10]
+    y, gain = np.empty(2), np.empty((2, N_STATES))
+    F, Phi, work = np.empty((N_STATES, N_STATES)), np.empty((N_STATES, N_STATES)), \
+        np.empty((6, N_STATES, N_STATES))
+    new_ctrl = np.empty(max(n_c, 1))
+    k1, k2, k3, k4, tmp = np.empty(4), np.empty(4), np.empty(4), np.empty(4), np.empty(4)
+    nan = np.nan
+    for k in range(n_steps):
+        # 1.-2. sensors and filter correction
+        y[0] = K_mx * plant[3] + noise_sigma[2] * noise[k, 2]
+        y[1] = K_mi * plant[2] + noise_sigma[3] * noise[k, 3]
+        nis = ef.update(x_hat, P, C, y, R_diag, gain)
+        # 3.-4. feedback, PID and feedforward
+        feedback = K_mx * x_hat[0] if use_estimate else y[0]
+        e = K_mx * reference_m[k] - feedback
+        u = Dc[0, 0] * e
+        for r in range(n_c):
+            u += Cc[0, r] * ctrl[r]
+        if model == ef.NONLINEAR:
+            u += feedforward_v_per_n * x_hat[4]
+        u = min(max(u, -u_limit), u_limit)
+        for r in range(n_c):
+            acc = Bc[r, 0] * e
+            for c in range(n_c):
+                acc += Ac[r, c] * ctrl[c]
+            new_ctrl[r] = acc
+        for r in range(n_c):
+            ctrl[r] = new_ctrl[r]
+        row = trace[k]
+        row[0], row[1], row[2] = plant[0], y[0] / K_mx, x_hat[0]
+        row[3], row[4], row[5] = np.sqrt(max(P[0, 0], 0.0)), plant[2], u
+        row[6], row[7] = reference_m[k], disturbance_n[k]
+        row[10], row[13] = ef.local_factors(plant[0], plant[2], plant_physics)
+        row[16] = nis
+        if model == ef.NONLINEAR:
+            row[8], row[9] = x_hat[4], np.sqrt(max(P[4, 4], 0.0))
+        else:
+            row[8], row[9] = nan, nan
+            row[11], row[12] = x_hat[4], np.sqrt(max(P[4, 4], 0.0))
+            row[14], row[15] = x_hat[3], np.sqrt(max(P[3, 3], 0.0))
+        # 5. filter prediction (eq. 18 reads the factors from its Phi)
+        ef.predict(model, x_hat, P, u, Q, filter_physics, F, Phi, work)
+        if model == ef.NONLINEAR:
+            row[11], row[14] = ef.factors_from_phi(Phi, filter_physics)
+            row[12], row[15] = nan, nan
+        # 6. plant
+        _rk4_step(plant, u, disturbance_n[k], plant_physics, T, k1, k2, k3, k4, tmp)
+        if Tmx <= 0.0:
+            plant[3] = plant[0]
+        plant[1] += noise_sigma[0] * noise[k, 0]
+        plant[2] += noise_sigma[1] * noise[k, 1]
+        if not (np.isfinite(plant[0]) and np.isfinite(plant[1])):
+            return DIVERGED, k + 1
+        if not (np.isfinite(x_hat[0]) and np.isfinite(P[0, 0]) and np.isfinite(x_hat[3])
+                and np.isfinite(x_hat[4])):
+            return FILTER_DIVERGED, k + 1
+        if abs(plant[0]) >= touchdown_m:
+            return TOUCHDOWN, k + 1
+    return OK, n_steps
+
+
+#: ``controllers.pid`` remembered per setting: its discretisation takes tens of
+#: milliseconds, and the analyses build the same PID for several runs.
+cached_pid = lru_cache(maxsize=16)(pid)
+
+
+def no_input(t: np.ndarray) -> np.ndarray:
+    """Zero at every sample time."""
+    return np.zeros_like(t)
+
+
+_PRBS_BITS = 2.0 * max_len_seq(9)[0] - 1.0
+
+
+# -- inputs: sample times [s] -> reference position [m] or force [N] ----------
+@dataclass(frozen=True)
+class Prbs:
+    """Offset plus a pseudo-random binary sequence of ±amplitude (§III-A: the
+    excitation superimposed on the reference).  A maximum-length sequence of
+    9 bits (511 bits, ``scipy.signal.max_len_seq``), each held ``bit_time_s``.
+    The offset ramps in over ``offset_ramp_s`` so that it does not kick the loop."""
+
+    amplitude: float
+    bit_time_s: float
+    offset: float = 0.0
+    offset_ramp_s: float = 0.05
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        bits = _PRBS_BITS[(t // self.bit_time_s).astype(int) % _PRBS_BITS.size]
+        return Ramp(self.offset, self.offset_ramp_s)(t) + self.amplitude * bits
+
+
+@dataclass(frozen=True)
+class Step:
+    """0 before ``time_s``, ``amplitude`` from then on."""
+
+    amplitude: float
+    time_s: float
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        return np.where(t >= self.time_s, self.amplitude, 0.0)
+
+
+@dataclass(frozen=True)
+class SquareWave:
+    """Period ``period_s``: first half 0, second half ``amplitude``."""
+
+    amplitude: float
+    period_s: float
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        return np.where(np.mod(t, self.period_s) >= 0.5 * self.period_s, self.amplitude, 0.0)
+
+
+@dataclass(frozen=True)
+class Ramp:
+    """From 0 linearly to ``amplitude`` over ``ramp_s``, then constant (a static load)."""
+
+    amplitude: float
+    ramp_s: float
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        return self.amplitude * np.clip(t / self.ramp_s, 0.0, 1.0)
+
+
+@dataclass(frozen=True)
+class Sine:
+    """0 until ``start_s``, then amplitude sin(2 pi (t - start_s) / period_s)."""
+
+    amplitude: float
+    period_s: float
+    start_s: float = 0.0
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        return self.amplitude * np.sin(2 * np.pi * np.maximum(t - self.start_s, 0.0) / self.period_s)
+
+
+@dataclass(frozen=True)
+class EKFLoopSetup:
+    """One experiment: rig, noise, filter, PID and the inputs (SI units).
+
+    Noise standard deviations are per sample (T = 50 µs); the plant's process
+    noise enters v (as the force ``process_force_n``) and i.  ``reference`` and
+    ``disturbance`` map sample times [s] to the reference position [m] and the
+    disturbance force f_z [N], counted from ``input_start_s``; ``experiment``
+    names that input programme (a retune to another one restarts it).
+    """
+
+    model: int                                   # ef.LINEARISED (§III-A) or ef.NONLINEAR (§III-B)
+    controller: control.StateSpace
+    filter_x0: np.ndarray
+    filter_P0: np.ndarray
+    filter_Q: np.ndarray
+    filter_R_diag: np.ndarray = field(default_factory=lambda: ef.PAPER_R_DIAG.copy())
+    filter_sensor_lag_s: float = 0.0
+    plant_sensor_lag_s: float = 0.0
+    use_estimate: bool = False
+    feedforward: bool = False
+    sensor_noise_m: float = 1.33e-6
+    current_noise_a: float = 1.87
+    process_force_n: float = 0.5
+    process_current_a: float = 1e-3
+    reference: Callable[[np.ndarray], np.ndarray] = no_input
+    disturbance: Callable[[np.ndarray], np.ndarray] = no_input
+    experiment: str = ""
+    input_start_s: float = 0.0
+    rig: BearingAxis = RIG
+
+    @property
+    def noise_sigma(self) -> np.ndarray:
+        rig = self.rig
+        return np.array([self.process_force_n * rig.sample_time_s / rig.equivalent_mass_kg,
+                         self.process_current_a, rig.position_sensor_gain_v_per_m * self.sensor_noise_m,
+                         rig.current_sensor_gain_v_per_a * self.current_noise_a])
+
+
+class EKFLoopSimulation:
+    """Time simulation of an ``EKFLoopSetup`` (the app's ``Simulation`` protocol).
+
+    Owns its seeded noise stream; ``advance`` releases the GIL in the kernel.
+    """
+
+    columns = TRACE_COLUMNS
+
+    def __init__(self, setup: EKFLoopSetup, seed: int = 0):
+        self.setup = setup
+        self.rng = np.random.default_rng(seed)
+        rig = setup.rig
+        self.sample_time_s = rig.sample_time_s
+        self.plant = np.zeros(4)
+        self.x_hat = np.array(setup.filter_x0, dtype=float)
+        self.P = np.array(setup.filter_P0, dtype=float)
+        self._Q = np.ascontiguousarray(setup.filter_Q, dtype=float)
+        self._R_diag = np.ascontiguousarray(setup.filter_R_diag, dtype=float)
+        self._C = ef.measurement_matrix(setup.model, rig)
+        self._plant_physics = ef.physics_vector(rig, setup.plant_sensor_lag_s)
+        self._filter_physics = ef.physics_vector(rig, setup.filter_sensor_lag_s)
+        controller = setup.controller
+        self._ctrl_matrices = tuple(np.ascontiguousarray(np.atleast_2d(np.asarray(M, dtype=float)))
+                                    for M in (controller.A, controller.B, controller.C, controller.D))
+        self.ctrl = np.zeros(self._ctrl_matrices[0].shape[0])
+        self._u_limit = rig.current_limit_a / rig.amplifier_gain_a_per_v
+        self._feedforward = (-1.0 / (rig.ki_n_per_a * rig.amplifier_gain_a_per_v)
+                             if setup.feedforward else 0.0)
+        self.step = 0
+        self.status = OK
+
+    def retuned(self, setup: EKFLoopSetup) -> EKFLoopSimulation:
+        """A simulation with new settings that carries on from this one's state
+        (rotor, filter, PID, time, noise stream), so a slider move changes the
+        running experiment; a new filter starting point restarts the filter only,
+        a new input programme (``experiment``) starts its inputs now."""
+        old = self.setup
+        start = old.input_start_s if setup.experiment == old.experiment else self.time_s
+        new = EKFLoopSimulation(replace(setup, input_start_s=start))
+        new.rng, new.step, new.status, new.plant[:] = self.rng, self.step, self.status, self.plant
+        if (np.array_equal(setup.filter_x0, old.filter_x0)
+                and np.array_equal(setup.filter_P0, old.filter_P0)):
+            new.x_hat[:], new.P[:] = self.x_hat, self.P
+        if new.ctrl.shape == self.ctrl.shape:
+            new.ctrl[:] = self.ctrl
+        return new
+
+    @property
+    def time_s(self) -> float:
+        return self.step * self.sample_time_s
+
+    def advance(self, n_steps: int) -> np.ndarray:
+        """Run up to ``n_steps`` samples; trace with a leading time column [s]."""
+        if self.status != OK or n_steps <= 0:
+            return np.empty((0, len(TRACE_COLUMNS) + 1))
+        setup = self.setup
+        t = (self.step + np.arange(n_steps)) * self.sample_time_s
+        reference = np.ascontiguousarray(setup.reference(t - setup.input_start_s), dtype=float)
+        disturbance = np.ascontiguousarray(setup.disturbance(t - setup.input_start_s), dtype=float)
+        noise = self.rng.standard_normal((n_steps, 4))
+        trace = np.empty((n_steps, len(TRACE_COLUMNS)))
+        status, done = run(n_steps, setup.model, self.plant, self._plant_physics, self.x_hat, self.P,
+                           self._Q, self._R_diag, self._C, self._filter_physics,
+                           self.ctrl, *self._ctrl_matrices, self._u_limit, setup.use_estimate,
+                           self._feedforward, reference, disturbance, noise, setup.noise_sigma,
+                           setup.rig.touchdown_m, trace)
+        self.step += done
+        self.status = status
+        return np.column_stack([t[:done], trace[:done]])
+
+    def status_message(self) -> str:
+        """'' while running; what stopped the simulation otherwise."""
+        t_ms = self.time_s * 1e3
+        if self.status == TOUCHDOWN:
+            return (f"Touchdown at t = {t_ms:.1f} ms: the rotor left the air gap "
+                    f"(|x| >= {self.setup.rig.touchdown_m * 1e6:.0f} µm). The loop is unstable, "
+                    "saturated or cannot hold the load at these settings; reset.")
+        if self.status == DIVERGED:
+            return f"Diverged at t = {t_ms:.1f} ms: the plant produced non-finite values; reset."
+        if self.status == FILTER_DIVERGED:
+            return (f"Filter diverged at t = {t_ms:.1f} ms: its estimate became non-finite "
+                    "(Q or R far from the plant's noise, or a wrong sensor lag); reset.")
+        return ""
+
+
+def column(trace: np.ndarray, name: str) -> np.ndarray:
+    """One named column of a trace returned by ``advance`` (column 0 is time)."""
+    return trace[:, 1 + TRACE_COLUMNS.index(name)]

@@ -1,0 +1,426 @@
+"""The test rig's flexible rotor: beam finite elements, modes, and the bearing
+axis as a state-space plant with the sensor anywhere along the shaft.
+
+Source: paper 000 (Schuhmann, Hofmann, Werner), §I, Fig. 2 and Appendix: a
+rotor of 25 kg and 910 mm, laminations Ø 272 mm, levitated *unilaterally*
+(one radial magnetic bearing); its third natural mode has a node close to the
+bearing laminations, so an external sensor beyond that node feeds mode 3 back
+with the wrong sign.
+
+The paper gives no drawing with dimensions.  The geometry below is chosen
+(not in the paper) to match every number it does give:
+
+* **Unilateral support.**  One end of the shaft runs in a ball bearing that
+  carries the radial load but no moment (a self-aligning ball bearing: a
+  *pivot*, the shaft's displacement there is zero, its slope free); the
+  magnetic bearing holds the other end.  The rotor's first mode is then the
+  rigid tilting about the pivot, levitated by the magnetic bearing alone.
+* **Mass 25 kg, length 910 mm:** a steel shaft Ø 38 mm × 910 mm (8.1 kg), the
+  lamination stack Ø 272 mm × 40 mm centred 800 mm from the drive end
+  (16.6 kg, electrical steel at a 0.95 stacking factor) and a 0.45 kg
+  coupling hub at the drive end; total 25.1 kg.  The ball bearing sits 40 mm
+  from the drive end.
+* **Equivalent mass.**  The rigid mode's modal mass seen at the bearing plane
+  is 20.1 kg, close to the appendix's equivalent rotor mass m = 21.5 kg of
+  eq. 3 (the paper's rigid one-axis model); the stack must sit near the
+  shaft's end and carry most of the mass for that to hold, as it does here.
+* **Mode 3's node near the laminations.**  The stack's large diametral inertia
+  nearly pins the bending modes there: mode 2 has a node 13 mm inboard of the
+  bearing plane, mode 3 one 18 mm outboard, i.e. at the stack's outer face.
+  An outboard sensor track therefore sees mode 3 with the opposite sign.
+  Natural frequencies (rotor on its ball bearing, magnetic bearing off):
+  0, 109, 296, 710 Hz.
+* The shaft diameter sets the bending frequencies.  Ø 38 mm puts mode 3
+  (296 Hz) above the bearing's closed-loop mode (~250 Hz): there the PID's
+  phase lead has run out, so the mode is lightly damped even with the
+  integrated sensor, and the wrong sign of an external sensor tips it over.
+* Bending modes carry 0.5 % modal damping (not in the paper; typical of a
+  steel shaft with a shrink-fitted stack).
+
+The laminations add mass and diametral inertia but no bending stiffness
+(thin insulated sheets); they are lumped onto the stack's end and centre nodes.
+Elements are Euler-Bernoulli beams with consistent mass matrices; the
+eigenproblem K phi = omega^2 M phi is solved by ``scipy.linalg.eigh``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import control
+import numpy as np
+import scipy.linalg
+
+from .amb_axis import RIG, BearingAxis
+
+STEEL_YOUNGS_PA = 210e9
+STEEL_DENSITY_KG_M3 = 7850.0
+#: Electrical steel at a stacking factor of 0.95 (7650 kg/m³ × 0.95).
+LAMINATION_DENSITY_KG_M3 = 7650.0 * 0.95
+
+
+def beam_element(length_m: float, bending_stiffness_n_m2: float, mass_per_length_kg_m: float):
+    """Stiffness and consistent mass matrices of one Euler-Bernoulli element.
+
+    Degrees of freedom (w1, theta1, w2, theta2): displacement [m] and slope
+    [rad] at both ends, cubic Hermite shape functions.
+    """
+    l = length_m
+    K = bending_stiffness_n_m2 / l**3 * np.array([
+        [12, 6 * l, -12, 6 * l],
+        [6 * l, 4 * l * l, -6 * l, 2 * l * l],
+        [-12, -6 * l, 12, -6 * l],
+        [6 * l, 2 * l * l, -6 * l, 4 * l * l]])
+    M = mass_per_length_kg_m * l / 420 * np.array([
+        [156, 22 * l, 54, -13 * l],
+        [22 * l, 4 * l * l, 13 * l, -3 * l * l],
+        [54, 13 * l, 156, -22 * l],
+        [-13 * l, -3 * l * l, -22 * l, 4 * l * l]])
+    return K, M
+
+
+def hermite_interpolate(node_z_m: np.ndarray, nodal: np.ndarray, z_m) -> np.ndarray:
+    """Displacement at positions ``z_m`` from nodal (w, theta) rows (2 per node),
+    with the elements' own cubic shape functions.  ``nodal`` may have columns
+    (one per mode); the result has shape (len(z_m), columns)."""
+    z = np.atleast_1d(np.asarray(z_m, dtype=float))
+    nodal = nodal.reshape(2 * len(node_z_m), -1)
+    e = np.clip(np.searchsorted(node_z_m, z, side="right") - 1, 0, len(node_z_m) - 2)
+    l = node_z_m[e + 1] - node_z_m[e]
+    s = (z - node_z_m[e]) / l
+    h = np.stack([1 - 3 * s**2 + 2 * s**3, l * (s - 2 * s**2 + s**3),
+                  3 * s**2 - 2 * s**3, l * (-s**2 + s**3)], axis=1)
+    rows = np.stack([2 * e, 2 * e + 1, 2 * e + 2, 2 * e + 3], axis=1)
+    return np.einsum("pk,pkm->pm", h, nodal[rows])
+
+
+@dataclass(frozen=True)
+class RotorGeometry:
+    """The rotor's dimensions [m], masses [kg] and supports (see module docstring)."""
+
+    length_m: float = 0.910
+    shaft_diameter_m: float = 0.038
+    pivot_m: float = 0.040                    # ball bearing (pivot) from the drive end
+    bearing_m: float = 0.800                  # magnetic bearing plane = lamination stack centre
+    stack_length_m: float = 0.040
+    stack_diameter_m: float = 0.272
+    hub_position_m: float = 0.015             # coupling hub at the drive end
+    hub_mass_kg: float = 0.45
+    hub_diameter_m: float = 0.070
+    modal_damping: float = 0.005              # bending modes (not in the paper)
+
+    @property
+    def stack_mass_kg(self) -> float:
+        area = np.pi / 4 * (self.stack_diameter_m**2 - self.shaft_diameter_m**2)
+        return LAMINATION_DENSITY_KG_M3 * area * self.stack_length_m
+
+    @property
+    def stack_inertia_kg_m2(self) -> float:
+        """Diametral moment of inertia of the stack about its centre, annulus part
+        m (D^2 + d^2) / 16; the length part m L^2 / 12 comes from its lumped masses."""
+        return self.stack_mass_kg * (self.stack_diameter_m**2 + self.shaft_diameter_m**2) / 16
+
+    @property
+    def shaft_mass_kg(self) -> float:
+        return STEEL_DENSITY_KG_M3 * np.pi / 4 * self.shaft_diameter_m**2 * self.length_m
+
+    @property
+    def total_mass_kg(self) -> float:
+        return self.shaft_mass_kg + self.stack_mass_kg + self.hub_mass_kg
+
+    @property
+    def stack_ends_m(self) -> tuple[float, float]:
+        return self.bearing_m - self.stack_length_m / 2, self.bearing_m + self.stack_length_m / 2
+
+
+def assemble_beam(node_z_m: np.ndarray, bending_stiffness_n_m2: float, mass_per_length_kg_m: float):
+    """Global stiffness and consistent mass matrices of a uniform beam on the given nodes."""
+    n_dof = 2 * len(node_z_m)
+    K, M = np.zeros((n_dof, n_dof)), np.zeros((n_dof, n_dof))
+    for e, l in enumerate(np.diff(node_z_m)):
+        Ke, Me = beam_element(l, bending_stiffness_n_m2, mass_per_length_kg_m)
+        dofs = slice(2 * e, 2 * e + 4)
+        K[dofs, dofs] += Ke
+        M[dofs, dofs] += Me
+    return K, M
+
+
+def solve_modes(K: np.ndarray, M: np.ndarray, constrained_dofs=()) -> tuple[np.ndarray, np.ndarray]:
+    """Natural angular frequencies [rad/s] (ascending) and mass-normalised shapes
+    (all degrees of freedom, zeros at the constrained ones) of K phi = omega^2 M phi."""
+    free = np.setdiff1d(np.arange(K.shape[0]), constrained_dofs)
+    omega_sq, vectors = scipy.linalg.eigh(K[np.ix_(free, free)], M[np.ix_(free, free)])
+    shapes = np.zeros((K.shape[0], len(free)))
+    shapes[free] = vectors
+    return np.sqrt(np.maximum(omega_sq, 0.0)), shapes
+
+
+class FlexibleRotor:
+    """Finite-element model of the rotor on its pivot, and its modes.
+
+    ``elements`` sets the mesh density (elements over the whole length); the
+    pivot, the stack's ends and centre and the disc are always nodes.
+    """
+
+    def __init__(self, geometry: RotorGeometry = RotorGeometry(), elements: int = 60):
+        self.geometry = g = geometry
+        key_points = [0.0, g.length_m, g.pivot_m, *g.stack_ends_m, g.bearing_m, g.hub_position_m]
+        z = np.concatenate([np.linspace(0.0, g.length_m, elements + 1), key_points])
+        self.node_z_m = np.unique(np.round(z, 9))
+        self.K, self.M = assemble_beam(self.node_z_m, STEEL_YOUNGS_PA * np.pi * g.shaft_diameter_m**4 / 64,
+                                       STEEL_DENSITY_KG_M3 * np.pi / 4 * g.shaft_diameter_m**2)
+        # the stack as a rigid body on its end and centre nodes with Simpson's weights 1/6, 2/3, 1/6:
+        # they reproduce its mass and its length's share of inertia (m L^2 / 12) on any mesh
+        low, high = g.stack_ends_m
+        for z, share in ((low, 1 / 6), (g.bearing_m, 2 / 3), (high, 1 / 6)):
+            self.add_lumped(self.node(z), share * g.stack_mass_kg, 0.0)
+        self.add_lumped(self.node(g.bearing_m), 0.0, g.stack_inertia_kg_m2)
+        self.add_lumped(self.node(g.hub_position_m), g.hub_mass_kg, g.hub_mass_kg * g.hub_diameter_m**2 / 16)
+        self.constrained_dofs = (2 * self.node(g.pivot_m),)
+
+    def node(self, z_m: float) -> int:
+        return int(np.argmin(np.abs(self.node_z_m - z_m)))
+
+    def add_lumped(self, node: int, mass_kg: float, inertia_kg_m2: float) -> None:
+        self.M[2 * node, 2 * node] += mass_kg
+        self.M[2 * node + 1, 2 * node + 1] += inertia_kg_m2
+
+    @property
+    def total_mass_kg(self) -> float:
+        translation = np.tile([1.0, 0.0], len(self.node_z_m))
+        return float(translation @ self.M @ translation)
+
+    @cached_property
+    def _modes(self) -> tuple[np.ndarray, np.ndarray]:
+        omega, shapes = solve_modes(self.K, self.M, self.constrained_dofs)
+        # sign convention: every mode moves positively at the free end
+        return omega, shapes * np.where(shapes[-2] < 0, -1.0, 1.0)
+
+    def natural_frequencies_hz(self, n_modes: int) -> np.ndarray:
+        return self._modes[0][:n_modes] / (2 * np.pi)
+
+    def mode_shapes(self, n_modes: int) -> np.ndarray:
+        """Mass-normalised nodal shapes (w, theta per node) of the first modes, one column each."""
+        return self._modes[1][:, :n_modes]
+
+    def displacement(self, z_m, n_modes: int) -> np.ndarray:
+        """Modal displacements phi_i(z) [m per unit modal coordinate], shape (len(z), n_modes)."""
+        return hermite_interpolate(self.node_z_m, self.mode_shapes(n_modes), z_m)
+
+    def nodal_points_m(self, mode: int) -> np.ndarray:
+        """Axial positions [m] where mode ``mode`` (0-based) crosses zero (pivot excluded)."""
+        z = np.linspace(0.0, self.geometry.length_m, 2001)
+        w = self.displacement(z, mode + 1)[:, mode]
+        w = np.where(np.abs(w) < 1e-9 * np.max(np.abs(w)), 0.0, w)
+        crossing = np.flatnonzero(w[:-1] * w[1:] < 0)
+        points = z[crossing] - w[crossing] * (z[crossing + 1] - z[crossing]) / (w[crossing + 1] - w[crossing])
+        return points[np.abs(points - self.geometry.pivot_m) > 5e-3]
+
+
+def modal_plant(rotor: FlexibleRotor, sensor_z_m: float, n_modes: int, sensor_lag_s: float,
+                rig: BearingAxis = RIG) -> control.StateSpace:
+    """Continuous plant of one bearing axis on the flexible rotor (modal truncation).
+
+    Paper 000 eq. 3-4 and 12 with the rigid mass replaced by ``n_modes`` modes:
+
+        eta_j'' + 2 zeta_j omega_j eta_j' + omega_j^2 eta_j = phi_j(z_b) (k_x x_b + k_i i + f_z)
+        x_b = sum_j phi_j(z_b) eta_j          (rotor at the bearing plane)
+        x_s = sum_j phi_j(z_s) eta_j          (rotor at the sensor)
+        T_a i' + i = K_a i_ref                (eq. 4)
+        T_mx x_d' + x_d = x_s                 (eq. 12, dropped when T_mx = 0)
+
+    States (eta_1..n [m·kg^½], eta'_1..n, i [A], x_d [m]); inputs (i_ref [V],
+    f_z [N] at the bearing); outputs (K_mx x_d [V], x_b [m], x_s [m], K_mi i [V]).
+    """
+    omega = 2 * np.pi * rotor.natural_frequencies_hz(n_modes)
+    zeta = np.where(omega > 1e-6, rotor.geometry.modal_damping, 0.0)
+    phi_b = rotor.displacement(rotor.geometry.bearing_m, n_modes)[0]
+    phi_s = rotor.displacement(sensor_z_m, n_modes)[0]
+    lag = sensor_lag_s > 0
+    n = 2 * n_modes + 1 + lag
+    A, B, C = np.zeros((n, n)), np.zeros((n, 2)), np.zeros((4, n))
+    modal, rate, current = slice(0, n_modes), slice(n_modes, 2 * n_modes), 2 * n_modes
+    A[modal, rate] = np.eye(n_modes)
+    A[rate, modal] = -np.diag(omega**2) + rig.kx_n_per_m * np.outer(phi_b, phi_b)
+    A[rate, rate] = -np.diag(2 * zeta * omega)
+    A[rate, current] = rig.ki_n_per_a * phi_b
+    A[current, current] = -1.0 / rig.amplifier_lag_s
+    B[current, 0] = rig.amplifier_gain_a_per_v / rig.amplifier_lag_s
+    B[rate, 1] = phi_b
+    if lag:
+        A[-1, modal], A[-1, -1] = phi_s / sensor_lag_s, -1.0 / sensor_lag_s
+        C[0, -1] = rig.position_sensor_gain_v_per_m
+    else:
+        C[0, modal] = rig.position_sensor_gain_v_per_m * phi_s
+    C[1, modal], C[2, modal] = phi_b, phi_s
+    C[3, current] = rig.current_sensor_gain_v_per_a
+    return control.ss(A, B, C, np.zeros((4, 2)), inputs=["i_ref", "f_z"],
+                      outputs=["y_position", "x_bearing", "x_sensor", "y_current"])
+
+
+# -- the closed loop -------------------------------------------------------------
+#: Inputs and outputs of the loop returned by ``closed_loop``.
+LOOP_INPUTS = ("reference_m", "disturbance_n", "noise_position_v", "noise_current_v")
+LOOP_OUTPUTS = ("sensor_reading_m", "x_bearing_m", "x_sensor_m", "current_a")
+
+
+def discrete_plant(rotor: FlexibleRotor, sensor_z_m: float, n_modes: int, sensor_lag_s: float,
+                   rig: BearingAxis = RIG) -> control.StateSpace:
+    """``modal_plant`` discretised with a zero-order hold at T = 50 µs (the DSP's sampling)."""
+    return control.c2d(modal_plant(rotor, sensor_z_m, n_modes, sensor_lag_s, rig), rig.sample_time_s, "zoh")
+
+
+def pid_compensator(controller: control.StateSpace, rig: BearingAxis = RIG) -> control.StateSpace:
+    """The PID acting on the measured position: u = C(z) (K_mx r - y_position).
+
+    Inputs (y_position [V], y_current [V], r [m]); output i_ref [V].
+    """
+    Ac, Bc, Cc, Dc = (np.atleast_2d(np.asarray(M)) for M in
+                      (controller.A, controller.B, controller.C, controller.D))
+    error = np.array([[-1.0, 0.0, rig.position_sensor_gain_v_per_m]])   # e from the inputs
+    return control.ss(Ac, Bc @ error, Cc, Dc @ error, controller.dt)
+
+
+def kalman_compensator(controller: control.StateSpace, model: control.StateSpace,
+                       kalman_gain: np.ndarray, rig: BearingAxis = RIG) -> control.StateSpace:
+    """The PID acting on the Kalman filter's estimate (paper 000 eq. 2, §II, Fig. 3).
+
+    The filter's model is the paper's *rigid* one-axis model (eq. 3-4, 12:
+    states x, v, i, x_d, equivalent mass 21.5 kg); it knows nothing of the
+    bending modes.  With the steady-state correction gain K and the
+    prediction x_p:
+
+        x_hat = (I - K C) x_p + K y                       (correction, eq. 2)
+        e     = K_mx (r - x_hat[0])                       (undelayed estimate fed back)
+        u     = C_c x_c + D_c e,    x_c+ = A_c x_c + B_c e  (PID)
+        x_p+  = A x_hat + B u                             (prediction, eq. 2)
+
+    Inputs (y_position [V], y_current [V], r [m]); output i_ref [V];
+    states (x_p, x_c).
+    """
+    A, B, C = (np.asarray(M) for M in (model.A, model.B, model.C))
+    Bu = B[:, :1]
+    Ac, Bc, Cc, Dc = (np.atleast_2d(np.asarray(M)) for M in
+                      (controller.A, controller.B, controller.C, controller.D))
+    K = np.asarray(kalman_gain)
+    n = A.shape[0]
+    h = np.zeros((1, n))
+    h[0, 0] = rig.position_sensor_gain_v_per_m
+    correction = np.eye(n) - K @ C
+    # e = Ep x_p + Ey (y, r)
+    Ep = -h @ correction
+    Ey = np.hstack([-h @ K, [[rig.position_sensor_gain_v_per_m]]])
+    Acomp = np.block([[A @ correction + Bu @ Dc @ Ep, Bu @ Cc],
+                      [Bc @ Ep, Ac]])
+    Bcomp = np.vstack([np.hstack([A @ K, np.zeros((n, 1))]) + Bu @ Dc @ Ey, Bc @ Ey])
+    Ccomp = np.hstack([Dc @ Ep, Cc])
+    return control.ss(Acomp, Bcomp, Ccomp, Dc @ Ey, controller.dt)
+
+
+def closed_loop(plant: control.StateSpace, compensator: control.StateSpace,
+                rig: BearingAxis = RIG) -> control.StateSpace:
+    """Plant and compensator closed by ``control.feedback`` (positive sign: the
+    compensator already subtracts the measurement).
+
+    The plant is extended so that the reference and the sensors' noise enter
+    as inputs: the compensator sees (y_position + noise, y_current + noise, r).
+    Inputs ``LOOP_INPUTS``; outputs ``LOOP_OUTPUTS`` (the sensor's noisy reading
+    and the rotor at the bearing and at the sensor in metres, the true coil current).
+    """
+    A, B, C = (np.asarray(M) for M in (plant.A, plant.B, plant.C))
+    n = A.shape[0]
+    k_mx, k_mi = rig.position_sensor_gain_v_per_m, rig.current_sensor_gain_v_per_a
+    # inputs (i_ref, f_z, r, noise_x, noise_i); outputs (y_pos + noise_x, y_cur + noise_i, r, x_b, x_s, K_mi i)
+    B_ext = np.hstack([B, np.zeros((n, 3))])
+    C_ext = np.vstack([C[0], C[3], np.zeros(n), C[1], C[2], C[3]])
+    D_ext = np.zeros((6, 5))
+    D_ext[0, 3] = D_ext[1, 4] = D_ext[2, 2] = 1.0
+    extended = control.ss(A, B_ext, C_ext, D_ext, plant.dt)
+    # the compensator reads (y_pos, y_cur, r) and drives i_ref only
+    nc = compensator.nstates
+    Cf, Df = np.zeros((5, nc)), np.zeros((5, 6))
+    Cf[0], Df[0, :3] = np.asarray(compensator.C)[0], np.asarray(compensator.D)[0]
+    feedback_path = control.ss(compensator.A, np.hstack([compensator.B, np.zeros((nc, 3))]), Cf, Df, plant.dt)
+    loop = control.feedback(extended, feedback_path, sign=1)
+    # outputs in physical units: reading [m], x_b [m], x_s [m], true coil current i [A]
+    scale = np.zeros((4, 6))
+    scale[0, 0], scale[1, 3], scale[2, 4], scale[3, 5] = 1 / k_mx, 1.0, 1.0, 1 / k_mi
+    inputs = np.zeros((5, 4))
+    inputs[2, 0], inputs[1, 1], inputs[3, 2], inputs[4, 3] = 1.0, 1.0, 1.0, 1.0
+    return control.ss(loop.A, loop.B @ inputs, scale @ loop.C, scale @ loop.D @ inputs, plant.dt,
+                      inputs=list(LOOP_INPUTS), outputs=list(LOOP_OUTPUTS))
+
+
+class LoopSimulation:
+    """Time simulation of a closed loop from ``closed_loop``: exact discrete
+    state-space stepping (numpy, the whole chunk's inputs at once).
+
+    ``inputs(step, n)`` returns the deterministic inputs (reference [m],
+    disturbance [N]) for the next n samples; random inputs are the force
+    noise ``force_sigma_n`` and the sensors' noise (sigmas in V).  The run
+    stops when the rotor at the bearing leaves the air gap or the coil current
+    exceeds the amplifier's limit (beyond it the linear model no longer holds).
+    """
+
+    columns = LOOP_OUTPUTS + ("reference_m",)
+
+    def __init__(self, loop: control.StateSpace, inputs, force_sigma_n: float, noise_sigma_v: tuple[float, float],
+                 seed: int = 0, touchdown_m: float = RIG.touchdown_m,
+                 current_limit_a: float = RIG.current_limit_a, explain=lambda: ""):
+        self.loop = loop
+        self.sample_time_s = float(loop.dt)
+        self.A, self.B, self.C, self.D = (np.asarray(M, dtype=float) for M in (loop.A, loop.B, loop.C, loop.D))
+        self.state = np.zeros(self.A.shape[0])
+        self.inputs = inputs
+        self.sigma = np.array([force_sigma_n, *noise_sigma_v])
+        self.rng = np.random.default_rng(seed)
+        self.touchdown_m = touchdown_m
+        self.current_limit_a = current_limit_a
+        self.explain = explain
+        self.stop_reason = ""
+        self.step = 0
+        self.stopped_at_s: float | None = None
+
+    def carry_on_from(self, other: LoopSimulation) -> LoopSimulation:
+        """Continue ``other``'s run (time, noise stream and, if the loop has the same order, state)."""
+        self.rng, self.step = other.rng, other.step
+        self.stopped_at_s, self.stop_reason = other.stopped_at_s, other.stop_reason
+        if other.state.shape == self.state.shape:
+            self.state[:] = other.state
+        return self
+
+    def advance(self, n_steps: int) -> np.ndarray:
+        if self.stopped_at_s is not None or n_steps <= 0:
+            return np.empty((0, 1 + len(self.columns)))
+        reference, disturbance = self.inputs(self.step, n_steps)
+        noise = self.rng.standard_normal((3, n_steps)) * self.sigma[:, None]
+        U = np.vstack([reference, disturbance + noise[0], noise[1], noise[2]])
+        drive = self.B @ U
+        X = np.empty((self.A.shape[0], n_steps))
+        x = self.state
+        for k in range(n_steps):
+            X[:, k] = x
+            x = self.A @ x + drive[:, k]
+        Y = self.C @ X + self.D @ U
+        done = n_steps
+        touchdown = ~(np.abs(Y[LOOP_OUTPUTS.index("x_bearing_m")]) < self.touchdown_m)
+        saturated = ~(np.abs(Y[LOOP_OUTPUTS.index("current_a")]) < self.current_limit_a)
+        out = np.flatnonzero(touchdown | saturated)
+        if out.size:
+            done = int(out[0]) + 1
+            self.stopped_at_s = (self.step + done) * self.sample_time_s
+            self.stop_reason = (f"the rotor left the {self.touchdown_m * 1e6:.0f} µm air gap at the bearing"
+                                if touchdown[out[0]] else
+                                f"the coil current reached the amplifier's limit of {self.current_limit_a:.1f} A "
+                                "(rated force), where the linear model ends")
+        else:
+            self.state = x
+        t = (self.step + np.arange(done)) * self.sample_time_s
+        self.step += done
+        return np.column_stack([t, Y[:, :done].T, reference[:done]])
+
+    def status_message(self) -> str:
+        if self.stopped_at_s is None:
+            return ""
+        return f"Stopped at t = {self.stopped_at_s * 1e3:.1f} ms: {self.stop_reason}. {self.explain()}"
