@@ -49,44 +49,51 @@ _JIT = {"nogil": True, "cache": True}
 
 
 @numba.njit(**_JIT)
-def _moment_rates(x, P, u, p, Q, dx, dP):
-    """Eq. 2.43 and 2.45 at (x, P)."""
+def _rates(x, P, u, y, p, Q, inverse_r_c, dx, dP):
+    """Eq. 2.43 and 2.45 at (x, P).  With inverse_r_c = 1/R_c > 0 they gain the Kalman-Bucy
+    terms of a continuous measurement y (the continuous-time filter); with 0 they are the
+    continuous-discrete filter's propagation between samples."""
     f = derivative(x, u, p)
     F = jacobian(x, p)
     FP = F @ P
+    correction = inverse_r_c * (y - x[0])
     for i in range(3):
-        dx[i] = f[i]
+        dx[i] = f[i] + P[i, 0] * correction
         for j in range(3):
-            dP[i, j] = FP[i, j] + FP[j, i] + Q[i, j]
+            dP[i, j] = FP[i, j] + FP[j, i] + Q[i, j] - P[i, 0] * P[0, j] * inverse_r_c
 
 
 @numba.njit(**_JIT)
-def propagate(x, P, u, p, Q, dt, n_substeps):
-    """Integrate eq. 2.43-2.45 over dt with u held: RK4 in ``n_substeps`` steps (in place)."""
-    h = dt / n_substeps
+def _rk4_step(x, P, u, y, p, Q, inverse_r_c, h):
+    """One classical RK4 step of ``_rates`` over h for (x, P) jointly, in place; P kept symmetric."""
     k_x = np.empty((4, 3))
     k_P = np.empty((4, 3, 3))
     xs = np.empty(3)
     Ps = np.empty((3, 3))
     weights = (0.0, 0.5, 0.5, 1.0)
-    for _ in range(n_substeps):
-        for stage in range(4):
-            w = weights[stage] * h
-            for i in range(3):
-                xs[i] = x[i] + (w * k_x[stage - 1, i] if stage > 0 else 0.0)
-                for j in range(3):
-                    Ps[i, j] = P[i, j] + (w * k_P[stage - 1, i, j] if stage > 0 else 0.0)
-            _moment_rates(xs, Ps, u, p, Q, k_x[stage], k_P[stage])
+    for stage in range(4):
+        w = weights[stage] * h
         for i in range(3):
-            x[i] += h / 6.0 * (k_x[0, i] + 2.0 * k_x[1, i] + 2.0 * k_x[2, i] + k_x[3, i])
+            xs[i] = x[i] + (w * k_x[stage - 1, i] if stage > 0 else 0.0)
             for j in range(3):
-                P[i, j] += h / 6.0 * (k_P[0, i, j] + 2.0 * k_P[1, i, j] + 2.0 * k_P[2, i, j]
-                                      + k_P[3, i, j])
-    for i in range(3):                       # exact symmetry
+                Ps[i, j] = P[i, j] + (w * k_P[stage - 1, i, j] if stage > 0 else 0.0)
+        _rates(xs, Ps, u, y, p, Q, inverse_r_c, k_x[stage], k_P[stage])
+    for i in range(3):
+        x[i] += h / 6.0 * (k_x[0, i] + 2.0 * k_x[1, i] + 2.0 * k_x[2, i] + k_x[3, i])
+        for j in range(3):
+            P[i, j] += h / 6.0 * (k_P[0, i, j] + 2.0 * k_P[1, i, j] + 2.0 * k_P[2, i, j] + k_P[3, i, j])
+    for i in range(3):
         for j in range(i + 1, 3):
             s = 0.5 * (P[i, j] + P[j, i])
             P[i, j] = s
             P[j, i] = s
+
+
+@numba.njit(**_JIT)
+def propagate(x, P, u, p, Q, dt, n_substeps):
+    """Integrate eq. 2.43-2.45 over dt with u held: RK4 in ``n_substeps`` steps (in place)."""
+    for _ in range(n_substeps):
+        _rk4_step(x, P, u, 0.0, p, Q, 0.0, dt / n_substeps)
 
 
 @numba.njit(**_JIT)
@@ -112,42 +119,9 @@ def update(x, P, y, r, gain):
 
 
 @numba.njit(**_JIT)
-def _bucy_rates(x, P, u, y, p, Q, r_c, dx, dP):
-    """Kalman-Bucy rates (the paper's first filter, App. G) with measurement y held."""
-    f = derivative(x, u, p)
-    F = jacobian(x, p)
-    FP = F @ P
-    innovation = y - x[0]
-    for i in range(3):
-        dx[i] = f[i] + P[i, 0] / r_c * innovation
-        for j in range(3):
-            dP[i, j] = FP[i, j] + FP[j, i] + Q[i, j] - P[i, 0] * P[0, j] / r_c
-
-
-@numba.njit(**_JIT)
 def bucy_step(x, P, u, y, p, Q, r_c, dt):
     """One RK4 step of the continuous-time EKF over dt (u and y held), in place."""
-    k_x = np.empty((4, 3))
-    k_P = np.empty((4, 3, 3))
-    xs = np.empty(3)
-    Ps = np.empty((3, 3))
-    weights = (0.0, 0.5, 0.5, 1.0)
-    for stage in range(4):
-        w = weights[stage] * dt
-        for i in range(3):
-            xs[i] = x[i] + (w * k_x[stage - 1, i] if stage > 0 else 0.0)
-            for j in range(3):
-                Ps[i, j] = P[i, j] + (w * k_P[stage - 1, i, j] if stage > 0 else 0.0)
-        _bucy_rates(xs, Ps, u, y, p, Q, r_c, k_x[stage], k_P[stage])
-    for i in range(3):
-        x[i] += dt / 6.0 * (k_x[0, i] + 2.0 * k_x[1, i] + 2.0 * k_x[2, i] + k_x[3, i])
-        for j in range(3):
-            P[i, j] += dt / 6.0 * (k_P[0, i, j] + 2.0 * k_P[1, i, j] + 2.0 * k_P[2, i, j] + k_P[3, i, j])
-    for i in range(3):
-        for j in range(i + 1, 3):
-            s = 0.5 * (P[i, j] + P[j, i])
-            P[i, j] = s
-            P[j, i] = s
+    _rk4_step(x, P, u, y, p, Q, 1.0 / r_c, dt)
 
 
 class ContinuousDiscreteEKF:
