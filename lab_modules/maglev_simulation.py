@@ -136,6 +136,16 @@ def hardware_q() -> np.ndarray:
     return np.diag([1e-4, 0.75e-7, 1e-8])
 
 
+def preset_q(values: dict) -> np.ndarray:
+    """Q(t) [m²/s, m²/s³, A²/s] from an exercise's ``q_preset`` ("table_3.1", "eq_3.4") or, for any
+    other preset, from its ``q_position``, ``q_velocity`` and ``q_current`` values."""
+    if values["q_preset"] == "table_3.1":
+        return table_3_1_q()
+    if values["q_preset"] == "eq_3.4":
+        return hardware_q()
+    return np.diag([values["q_position"], values["q_velocity"], values["q_current"]])
+
+
 @dataclass(frozen=True)
 class MaglevSetup:
     """Everything one maglev experiment needs (SI units; Table 3.1 defaults).

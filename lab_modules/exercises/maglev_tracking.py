@@ -35,8 +35,7 @@ from ..maglev_simulation import (
     MaglevSetup,
     MaglevSimulation,
     Reference,
-    hardware_q,
-    table_3_1_q,
+    preset_q,
 )
 from ..parameters import Parameter
 from . import Analysis, Chart, Exercise, Plot, Series
@@ -113,15 +112,6 @@ PARAMETERS = (
 )
 
 
-def filter_q(values: dict) -> np.ndarray:
-    """The filter's Q(t) of eq. 2.45 [m²/s, m²/s³, A²/s]."""
-    if values["q_preset"] == "table_3.1":
-        return table_3_1_q()
-    if values["q_preset"] == "eq_3.4":
-        return hardware_q()
-    return np.diag([values["q_position"], values["q_velocity"], values["q_current"]])
-
-
 def reference(values: dict, name: str | None = None) -> Reference:
     spec = dict(REFERENCES[name or values["reference"]])
     if spec["kind"] != "step" and spec["amplitude_m"] < 1e-4:
@@ -132,7 +122,7 @@ def reference(values: dict, name: str | None = None) -> Reference:
 
 def setup(values: dict, reference_name: str | None = None) -> MaglevSetup:
     """The experiment described by the parameter values."""
-    Q = filter_q(values)
+    Q = preset_q(values)
     current = TABLE_3_1.equilibrium_current_a(GAP_M)
     return MaglevSetup(
         true_plant=replace(TABLE_3_1, coil_resistance_ohm=values["plant_resistance_ohm"]),

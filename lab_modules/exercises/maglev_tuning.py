@@ -28,7 +28,7 @@ import scipy.stats
 from .. import recordings
 from ..continuous_discrete_ekf import OBSERVER_COLUMNS, run_observer
 from ..maglev import TABLE_3_1
-from ..maglev_simulation import hardware_q, table_3_1_q
+from ..maglev_simulation import preset_q
 from ..parameters import Parameter, ParameterError
 from . import Analysis, Chart, Exercise, Plot, Series
 
@@ -70,11 +70,7 @@ PARAMETERS = (
 
 def filter_q(values: dict) -> np.ndarray:
     """The filter's Q(t) of eq. 2.45 [m²/s, m²/s³, A²/s] for the chosen preset."""
-    if values["q_preset"] == "eq_3.4":
-        return hardware_q()
-    if values["q_preset"] == "table_3.1":
-        return table_3_1_q()
-    Q = np.diag([values["q_position"], values["q_velocity"], values["q_current"]])
+    Q = preset_q(values)
     if values["q_preset"] == "nis_tuned":
         Q[1, 1] = nis_tuned_q_velocity(recording(values), values)
     return Q
