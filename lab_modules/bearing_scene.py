@@ -19,9 +19,9 @@ markers of the measured and estimated positions are drawn displaced by
 rotor then overlaps the poles it approaches; the true gaps are in the text).
 
 Framing: viser's default camera (three.js position (3, 3, 3) looking at the
-origin, 75° vertical field of view) on a 1366 x 768 window, where the scene is
-visible only in the strip left of the control panel (about 200 px wide; the
-right panel takes 760 px).  The bearing's face is turned parallel to the image
+origin, 75° vertical field of view) on a 1366 x 768 window: the canvas is
+the 606 px left of the docked 760 px panel, and the scene is visible only in
+the strip left of the floating control panel (about 200 px wide).  The bearing's face is turned parallel to the image
 plane and placed life size on the camera ray through that strip, as near
 to the camera as makes it about ``STATOR_DIAMETER_PX`` wide.
 """
@@ -68,7 +68,7 @@ BEARING_FORCE_GREEN, DISTURBANCE_PURPLE = (44, 160, 44), (148, 103, 189)
 # The default camera in world coordinates (scene up +z), as the viewer shows it.
 CAMERA_POSITION = np.array([3.0, 3.0, 3.0])
 CAMERA_FOV_RAD = np.deg2rad(75.0)
-WINDOW_PX = (1366, 768)
+CANVAS_PX = (1366 - 760, 768)      # the window less the right panel docked beside the canvas
 BEARING_CENTRE_PX = (102, 430)      # in the strip left of the control panel
 STATOR_DIAMETER_PX = 170
 
@@ -80,9 +80,9 @@ def view_pose() -> tuple[np.ndarray, np.ndarray]:
     right = np.cross(forward, (0.0, 0.0, 1.0))
     right /= np.linalg.norm(right)
     up = np.cross(right, forward)
-    focal_px = WINDOW_PX[1] / 2 / np.tan(CAMERA_FOV_RAD / 2)
-    across = (BEARING_CENTRE_PX[0] - WINDOW_PX[0] / 2) / focal_px
-    down = (BEARING_CENTRE_PX[1] - WINDOW_PX[1] / 2) / focal_px
+    focal_px = CANVAS_PX[1] / 2 / np.tan(CAMERA_FOV_RAD / 2)
+    across = (BEARING_CENTRE_PX[0] - CANVAS_PX[0] / 2) / focal_px
+    down = (BEARING_CENTRE_PX[1] - CANVAS_PX[1] / 2) / focal_px
     depth = focal_px * 2 * STATOR_RADIUS_M / STATOR_DIAMETER_PX     # life size, near the camera
     position = CAMERA_POSITION + depth * (forward + across * right - down * up)
     rotation = tf.SO3.from_matrix(np.column_stack([-forward, right, up]))
