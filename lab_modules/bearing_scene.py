@@ -54,6 +54,7 @@ COIL_DEPTH_M = 0.030
 STATOR_RADIUS_M = BORE_RADIUS_M + POLE_LENGTH_M + YOKE_THICKNESS_M
 MAX_DRAWN_OFFSET_M = 0.07           # beyond this the drawn displacement is clamped ("off scale")
 LONGEST_ARROW_M = 0.12
+NO_SHADOWS = {"cast_shadow": False, "receive_shadow": False}   # shadows cost frames, show nothing here
 
 #: Magnet centres, clockwise from the top of the view; the upper and lower
 #: magnets act on the simulated axis x.
@@ -163,17 +164,18 @@ class BearingScene:
         wxyz, position = view_pose()
         scene.add_frame(ROOT, show_axes=False, wxyz=wxyz, position=position)
         vertices, faces = tube(STACK_LENGTH_M, BORE_RADIUS_M + POLE_LENGTH_M - 0.002, STATOR_RADIUS_M, 96)
-        scene.add_mesh_simple(f"{ROOT}/stator/yoke", vertices, faces, color=STATOR)
+        scene.add_mesh_simple(f"{ROOT}/stator/yoke", vertices, faces, color=STATOR, **NO_SHADOWS)
         h["coils"] = {}
         for magnet, angles in pole_angles_rad().items():
             for k, angle in enumerate(angles):
                 scene.add_box(f"{ROOT}/stator/pole_{magnet}_{k}", STATOR,
                               (STACK_LENGTH_M, POLE_WIDTH_M, POLE_LENGTH_M), wxyz=_about_shaft(angle),
-                              position=_radial(angle, BORE_RADIUS_M + POLE_LENGTH_M / 2))
+                              position=_radial(angle, BORE_RADIUS_M + POLE_LENGTH_M / 2), **NO_SHADOWS)
                 h["coils"][magnet, k] = scene.add_box(
                     f"{ROOT}/coils/{magnet}_{k}", coil_color(RIG.i0_a),
                     (STACK_LENGTH_M + 2 * COIL_THICKNESS_M, POLE_WIDTH_M + 2 * COIL_THICKNESS_M, COIL_DEPTH_M),
-                    wxyz=_about_shaft(angle), position=_radial(angle, BORE_RADIUS_M + 0.012 + COIL_DEPTH_M / 2))
+                    wxyz=_about_shaft(angle), position=_radial(angle, BORE_RADIUS_M + 0.012 + COIL_DEPTH_M / 2),
+                    **NO_SHADOWS)
         front = STACK_LENGTH_M / 2 + COIL_THICKNESS_M + 0.002
         centre_mark = np.array([[[front, -0.012, 0.0], [front, 0.012, 0.0]],
                                 [[front, 0.0, -0.012], [front, 0.0, 0.012]]], dtype=np.float32)
@@ -181,16 +183,18 @@ class BearingScene:
                                 thickness_units="screen")
         h["rotor"] = scene.add_frame(f"{ROOT}/rotor", show_axes=False)
         vertices, faces = tube(STACK_LENGTH_M, SHAFT_RADIUS_M, ROTOR_RADIUS_M, 96)
-        scene.add_mesh_simple(f"{ROOT}/rotor/laminations", vertices, faces, color=LAMINATION)
+        scene.add_mesh_simple(f"{ROOT}/rotor/laminations", vertices, faces, color=LAMINATION, **NO_SHADOWS)
         vertices, faces = tube(0.16, 0.0, SHAFT_RADIUS_M, 32)
-        scene.add_mesh_simple(f"{ROOT}/rotor/shaft", vertices, faces, color=STEEL, position=(-0.05, 0.0, 0.0))
-        scene.add_icosphere(f"{ROOT}/rotor/centre", 0.006, TRUE_BLUE, position=(0.035, 0.0, 0.0))
+        scene.add_mesh_simple(f"{ROOT}/rotor/shaft", vertices, faces, color=STEEL, position=(-0.05, 0.0, 0.0),
+                              **NO_SHADOWS)
+        scene.add_icosphere(f"{ROOT}/rotor/centre", 0.006, TRUE_BLUE, position=(0.035, 0.0, 0.0), **NO_SHADOWS)
         h["ghosts"] = []
         for k, ghost in enumerate(self.ghosts):
             frame = scene.add_frame(f"{ROOT}/ghost_{k}", show_axes=False, visible=False)
             scene.add_line_segments(f"{ROOT}/ghost_{k}/outline", circle(ROTOR_RADIUS_M, front), ghost.color,
                                     thickness=2.0, thickness_units="screen")
-            scene.add_icosphere(f"{ROOT}/ghost_{k}/centre", 0.005, ghost.color, position=(front + 0.02, 0.0, 0.0))
+            scene.add_icosphere(f"{ROOT}/ghost_{k}/centre", 0.005, ghost.color, position=(front + 0.02, 0.0, 0.0),
+                                  **NO_SHADOWS)
             h["ghosts"].append(frame)
         h["arrows"] = {name: scene.add_arrows(f"{ROOT}/arrows/{name}", np.zeros((1, 2, 3), np.float32), color,
                                               shaft_radius=0.005, head_radius=0.011, head_length=0.02,
