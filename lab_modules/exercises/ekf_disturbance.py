@@ -47,6 +47,7 @@ import numpy as np
 from .. import analysis
 from .. import extended_filters as ef
 from ..amb_axis import DEFAULT_SENSOR_LAG_S, RIG
+from ..bearing_scene import ESTIMATE_RED, MEASURED_GREY, BearingScene, Ghost
 from ..ekf_loop import (
     EKFLoopSetup,
     EKFLoopSimulation,
@@ -290,6 +291,14 @@ class EkfDisturbance(Exercise):
     def retune(self, simulation: EKFLoopSimulation, values: dict) -> EKFLoopSimulation:
         """A slider move changes the running experiment; a new experiment starts its inputs now."""
         return simulation.retuned(setup(values))
+
+    def scene(self, values: dict) -> BearingScene:
+        """The bearing with the force steps f_z (tens of micrometres: drawn ×1000)."""
+        return BearingScene(values, exaggeration=1000, force_scale_m_per_n=2e-4,
+                            true_column="x_true_m", current_column="current_a",
+                            ghosts=(Ghost("measured", "x_measured_m", MEASURED_GREY),
+                                    Ghost("estimate", "x_estimated_m", ESTIMATE_RED)),
+                            disturbance_n=lambda latest, values: latest["force_true_n"])
 
     def metrics(self, values: dict, duration_s: float) -> dict:
         step, sweep = force_step(values, duration_s), gap_sweep(values)

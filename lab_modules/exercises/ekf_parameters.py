@@ -37,6 +37,7 @@ import numpy as np
 
 from .. import extended_filters as ef
 from ..amb_axis import RIG
+from ..bearing_scene import ESTIMATE_RED, MEASURED_GREY, BearingScene, Ghost
 from ..ekf_loop import EKFLoopSetup, EKFLoopSimulation, Prbs, column
 from ..parameters import Parameter
 from . import Analysis, Chart, Exercise, Plot, Series
@@ -197,6 +198,13 @@ class EkfParameters(Exercise):
     def retune(self, simulation: EKFLoopSimulation, values: dict) -> EKFLoopSimulation:
         """A slider move changes the running experiment (switch the PRBS on and watch)."""
         return simulation.retuned(setup(values))
+
+    def scene(self, values: dict) -> BearingScene:
+        """The bearing under the PRBS excitation (tens of micrometres: drawn ×2000)."""
+        return BearingScene(values, exaggeration=2000, force_scale_m_per_n=2e-4,
+                            true_column="x_true_m", current_column="current_a",
+                            ghosts=(Ghost("measured", "x_measured_m", MEASURED_GREY),
+                                    Ghost("estimate", "x_estimated_m", ESTIMATE_RED)))
 
     def metrics(self, values: dict, duration_s: float) -> dict:
         n_steps = round(duration_s / T)

@@ -24,6 +24,7 @@ import numpy as np
 from .. import analysis
 from ..amb_axis import DEFAULT_SENSOR_LAG_S, RIG
 from ..axis_simulation import AxisSetup, AxisSimulation
+from ..bearing_scene import ESTIMATE_RED, MEASURED_GREY, BearingScene, Ghost
 from ..closed_loop import TRACE_COLUMNS
 from ..parameters import Parameter
 from . import Analysis, Chart, Exercise, Series
@@ -203,6 +204,15 @@ class KalmanNoise(Exercise):
 
     def simulation(self, values: dict) -> AxisSimulation:
         return AxisSimulation(setup(values), seed=int(values["seed"]))
+
+    def scene(self, values: dict) -> BearingScene:
+        """The bearing with the rotor's noise-driven motion (micrometres: drawn ×10000)."""
+        return BearingScene(values, exaggeration=10_000, force_scale_m_per_n=1e-3,
+                            true_column="x_true_m", current_column="current_a",
+                            ghosts=(Ghost("measured", "x_measured_m", MEASURED_GREY),
+                                    Ghost("estimate", "x_estimated_m", ESTIMATE_RED)),
+                            disturbance_n=lambda latest, values: float(
+                                setup(values).inputs_at(latest["time_s"])[1]))
 
     def metrics(self, values: dict, duration_s: float) -> dict:
         axis = setup(values)

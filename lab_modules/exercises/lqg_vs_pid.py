@@ -32,6 +32,7 @@ import numpy as np
 from .. import analysis
 from ..amb_axis import RIG
 from ..axis_simulation import AxisSetup, AxisSimulation
+from ..bearing_scene import ESTIMATE_RED, TRUE_BLUE, BearingScene, Ghost
 from ..closed_loop import OK, TRACE_COLUMNS
 from ..controllers import PAPER_LQG, PAPER_LQR_WEIGHTS, StateFeedback, integral_augmented_model, lqr
 from ..parameters import Parameter
@@ -346,6 +347,15 @@ class LqgVsPid(Exercise):
     def live_readouts(self, trace: dict[str, np.ndarray]) -> list[tuple[str, float, str]]:
         return [(f"{name}: RMS control current, this run", rms(trace[f"current_a_{name.lower()}"]), "A")
                 for name in LOOPS]
+
+    def scene(self, values: dict) -> BearingScene:
+        """The LQG loop's rotor in the bearing, the PID loop's rotor as an outline
+        (steps of tens of micrometres: drawn ×1000)."""
+        return BearingScene(values, exaggeration=1000, force_scale_m_per_n=2e-4,
+                            true_column="x_true_m_lqg", current_column="current_a_lqg", rotor_label="LQG",
+                            ghosts=(Ghost("LQG estimate", "x_estimated_m_lqg", ESTIMATE_RED),
+                                    Ghost("PID rotor", "x_true_m_pid", TRUE_BLUE)),
+                            disturbance_n=lambda latest, values: latest["disturbance_n"])
 
     def metrics(self, values: dict, duration_s: float) -> dict:
         loops = setups(values)
