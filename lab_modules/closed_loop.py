@@ -22,6 +22,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from .controllers import controller_step
 from .estimators import STATE_SIZE, predict, update
 
 OK, DIVERGED, TOUCHDOWN = 0, 1, 2
@@ -66,26 +67,6 @@ def _rk4_step(s, u, f_z, p, T, k1, k2, k3, k4, tmp):
     _nonlinear_derivative(tmp, u, f_z, p, k4)
     for j in range(4):
         s[j] += T / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j])
-
-
-@numba.njit(inline="always", **JIT)
-def controller_step(e, offset_v, u_limit, ctrl, Ac, Bc, Cc, Dc, work):
-    """One sample of the discrete SISO controller (Ac, Bc, Cc, Dc) on the error e [V]:
-    returns i_ref = Cc ctrl + Dc e + offset_v clipped at ±u_limit [V] (offset: state
-    feedback -K_s x_hat, eq. 22, or a feedforward), and advances its state
-    ctrl <- Ac ctrl + Bc e in place (``work``: scratch of ctrl's size)."""
-    n_c = ctrl.shape[0]
-    u = Dc[0, 0] * e + offset_v
-    for r in range(n_c):
-        u += Cc[0, r] * ctrl[r]
-    for r in range(n_c):
-        acc = Bc[r, 0] * e
-        for c in range(n_c):
-            acc += Ac[r, c] * ctrl[c]
-        work[r] = acc
-    for r in range(n_c):
-        ctrl[r] = work[r]
-    return min(max(u, -u_limit), u_limit)
 
 
 @numba.njit(**JIT)

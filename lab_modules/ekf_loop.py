@@ -29,7 +29,8 @@ from scipy.signal import max_len_seq
 
 from . import extended_filters as ef
 from .amb_axis import RIG, BearingAxis
-from .closed_loop import _rk4_step, controller_step
+from .closed_loop import _rk4_step
+from .controllers import controller_step
 from .extended_filters import N_STATES
 
 OK, DIVERGED, TOUCHDOWN, FILTER_DIVERGED = 0, 1, 2, 3
