@@ -6,7 +6,9 @@ Reports, from one run:
   ``KalmanFilter.predict/update`` (same seed and noise), and the largest
   relative difference between the two loops' estimates;
 * the aggregate speed of two simulations on two threads against one, and the
-  CPU time per wall time of that run (near 2 when the loops run in parallel).
+  CPU time per wall time of that run (near 2 when the loops run in parallel);
+* for every exercise, its simulation's speed and the share of one core a tab
+  takes at the exercise's default time scale (for sizing a classroom server).
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import numpy as np
 from filterpy.kalman import KalmanFilter as FilterpyKalman
 
 from lab_modules import closed_loop
-from lab_modules.exercises import get
+from lab_modules.exercises import get, registry
 
 
 def _simulation(use_estimate: bool = True, seed: int = 0):
@@ -112,8 +114,32 @@ def run(seconds: float = 2.0) -> dict:
     }
 
 
+def classroom_load(seconds: float = 0.5) -> dict:
+    """Per exercise: simulated seconds per wall second of its browser simulation
+    (best of three), and the share of one core one tab needs at the default
+    time scale (0.01 = a hundred tabs per core)."""
+    load = {}
+    for name, exercise in registry().items():
+        values = exercise.resolve({})
+        simulation = exercise.simulation(values)
+        simulation.advance(10)                              # compile / warm up
+        n_steps = max(int(seconds / simulation.sample_time_s), 1)
+        speed = 0.0
+        for _ in range(3):
+            start = time.perf_counter()
+            done = len(simulation.advance(n_steps))
+            if done == 0:
+                break
+            speed = max(speed, done * simulation.sample_time_s / (time.perf_counter() - start))
+        time_scale = values.get("time_scale", 1.0)
+        load[name] = {"realtime_factor": speed, "default_time_scale": time_scale,
+                      "core_share_per_tab": time_scale / speed if speed else float("nan")}
+    return load
+
+
 def main(seconds: float = 2.0, as_json: bool = False) -> int:
     result = run(seconds)
+    result["classroom_load"] = classroom_load()
     if as_json:
         print(json.dumps(result, indent=2))
     else:

@@ -307,7 +307,7 @@ class LabSession:
             now = time.perf_counter()
             elapsed, last = now - last, now
             if self.scene is not None:
-                self.scene.animate(now)
+                self.scene.animate(now, self._latest())
             with self.lock:
                 if not self.running:
                     continue
@@ -329,6 +329,14 @@ class LabSession:
                     self.status.content = f"**Stopped: {message}** Press Run or Reset to start again."
                     self.client.add_notification("Simulation stopped", message, color="red",
                                                  auto_close_seconds=10.0)
+
+    def _latest(self) -> dict[str, float]:
+        """The newest sample of the scope buffer by column name (empty before the first)."""
+        buffer = self.buffer
+        if len(buffer) == 0:
+            return {}
+        row = buffer[-1]
+        return {"time_s": float(row[0]), **{name: float(row[column]) for name, column in self.columns.items()}}
 
     def _draw(self) -> None:
         with self.lock:

@@ -112,6 +112,12 @@ class AxisSetup:
                          "noise_x_v": sigma[2] ** 2, "noise_i_v": sigma[3] ** 2}
         return analysis.noise_rms(self.loop(use_estimate, gain_factor), variances)
 
+    def inputs_at(self, t_s) -> tuple[np.ndarray, np.ndarray]:
+        """Reference [m] and disturbance force [N] at times ``t_s`` [s]: square
+        waves of period ``step_period_s`` (first half zero, second half on)."""
+        on = (np.mod(t_s, self.step_period_s) >= 0.5 * self.step_period_s).astype(float)
+        return self.reference_step_m * on, self.disturbance_step_n * on
+
     def with_changes(self, **changes) -> AxisSetup:
         return replace(self, **changes)
 
@@ -180,14 +186,11 @@ class AxisSimulation:
         return self.step * self.setup.rig.sample_time_s
 
     def inputs(self, n_steps: int) -> tuple[np.ndarray, np.ndarray]:
-        """Reference [m] and disturbance force [N] for the next samples: square
-        waves of period ``step_period_s`` (first half zero, second half on)."""
-        setup, T = self.setup, self.setup.rig.sample_time_s
+        """Reference [m] and disturbance force [N] for the next samples (``AxisSetup.inputs_at``)."""
+        setup = self.setup
         if setup.reference_step_m == 0.0 and setup.disturbance_step_n == 0.0:
             return np.zeros(n_steps), np.zeros(n_steps)
-        t = (self.step + np.arange(n_steps)) * T
-        on = (np.mod(t, setup.step_period_s) >= 0.5 * setup.step_period_s).astype(float)
-        return setup.reference_step_m * on, setup.disturbance_step_n * on
+        return setup.inputs_at((self.step + np.arange(n_steps)) * setup.rig.sample_time_s)
 
     def advance(self, n_steps: int) -> np.ndarray:
         """Run ``n_steps`` samples (fewer if the rotor touches down or diverges);

@@ -160,7 +160,7 @@ class RotorScene:
         mode = int(values["shown_mode"])
         h["mode_label"].text = f"mode {mode}: {self.frequency_hz:.0f} Hz (slowed, exaggerated; red: nodes)"
 
-    def animate(self, wall_time_s: float) -> None:
+    def animate(self, wall_time_s: float, latest: dict[str, float]) -> None:
         h = self.handles
         if not h:
             return

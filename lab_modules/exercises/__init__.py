@@ -79,8 +79,9 @@ class SceneView(Protocol):
     def update(self, values: dict) -> None:
         """A parameter changed."""
 
-    def animate(self, wall_time_s: float) -> None:
-        """Called every display frame."""
+    def animate(self, wall_time_s: float, latest: dict[str, float]) -> None:
+        """Called every display frame; ``latest`` maps each trace column (and
+        ``time_s``) to its newest value, empty before the first samples."""
 
 
 class Exercise:
@@ -141,6 +142,8 @@ MODULES = (
     "ekf_disturbance",
     "lqg_vs_pid",
     "sensor_placement",
+    "maglev_tracking",
+    "maglev_tuning",
 )
 
 

@@ -32,10 +32,12 @@ import numpy as np
 from .. import analysis
 from ..amb_axis import RIG
 from ..axis_simulation import AxisSetup, AxisSimulation
+from ..bearing_scene import ESTIMATE_RED, TRUE_BLUE, BearingScene, Ghost
 from ..closed_loop import OK, TRACE_COLUMNS
 from ..controllers import PAPER_LQG, PAPER_LQR_WEIGHTS, StateFeedback, integral_augmented_model, lqr
 from ..parameters import Parameter
 from . import Analysis, Chart, Exercise, Plot, Series, kalman_noise
+from ._common import pid_from_values
 
 T = RIG.sample_time_s
 LOOPS = ("LQG", "PID")
@@ -123,8 +125,7 @@ def setups(values: dict) -> dict[str, AxisSetup]:
         step_period_s=values["step_period_ms"] * 1e-3,
     )
     lqg = regulator(values)
-    pid = kalman_noise.cached_pid(values["pid_gain"], values["integral_time_ms"] * 1e-3,
-                                  values["derivative_time_ms"] * 1e-3, values["derivative_filter_us"] * 1e-6, T)
+    pid = pid_from_values(values)
     return {
         "LQG": common.with_changes(controller=lqg.integrator(), state_gain=lqg.state_gain,
                                    use_estimate=values["integrator_input"] == "estimated"),
@@ -346,6 +347,15 @@ class LqgVsPid(Exercise):
     def live_readouts(self, trace: dict[str, np.ndarray]) -> list[tuple[str, float, str]]:
         return [(f"{name}: RMS control current, this run", rms(trace[f"current_a_{name.lower()}"]), "A")
                 for name in LOOPS]
+
+    def scene(self, values: dict) -> BearingScene:
+        """The LQG loop's rotor in the bearing, the PID loop's rotor as an outline
+        (steps of tens of micrometres: drawn ×1000)."""
+        return BearingScene(values, exaggeration=1000, force_scale_m_per_n=2e-4,
+                            true_column="x_true_m_lqg", current_column="current_a_lqg", rotor_label="LQG",
+                            ghosts=(Ghost("LQG estimate", "x_estimated_m_lqg", ESTIMATE_RED),
+                                    Ghost("PID rotor", "x_true_m_pid", TRUE_BLUE)),
+                            disturbance_n=lambda latest, values: latest["disturbance_n"])
 
     def metrics(self, values: dict, duration_s: float) -> dict:
         loops = setups(values)
