@@ -32,6 +32,7 @@ CONTROL_WIDTH_PX = 380            # the docked controls (left)
 PANEL_WIDTH_PX = 600              # the docked charts (right); of 1366 px, 386 stay for the 3D view and the
                                   # notifications (which open there and would otherwise cover the panel's tabs)
 SCOPE_ASPECT = 2.2                # width / height of a scope chart
+SETTLE_BEFORE_REMOVAL_S = 0.3     # an exercise switch waits this long between the last chart update and removal
 LIGHT_DAMPING = 0.3               # poles below this damping always belong to the dominant view
 
 
@@ -96,6 +97,10 @@ class LabSession:
             self.generation = next(self.generations)  # the old thread and analyses stop writing
         if self.thread is not None:
             self.thread.join(timeout=2.0)
+        # The browser applies the chart updates of a message batch after its removals (and then
+        # reports updates of removed charts): let the last updates go out in a batch of their own.
+        self.client.flush()
+        time.sleep(SETTLE_BEFORE_REMOVAL_S)
         with self.gui_lock:
             self.client.gui.reset()
             self.client.scene.reset()

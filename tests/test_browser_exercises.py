@@ -28,14 +28,15 @@ def _readout_table(page):
     return page.locator("table").filter(has_text="quantity").first
 
 
-def _scope_moves(page) -> bool:
-    """The first scope chart's pixels change while the simulation runs."""
+def _scope_runs(page) -> bool:
+    """The first scope chart's pixels change, or the run stopped (an unstable default
+    setting is a lesson: the status line then says why)."""
     chart = page.locator(".uplot").first
     before = chart.screenshot()
-    deadline = time.time() + 5
+    deadline = time.time() + 15
     while time.time() < deadline:
         time.sleep(0.2)
-        if chart.screenshot() != before:
+        if page.get_by_text("Stopped:").count() or chart.screenshot() != before:
             return True
     return False
 
@@ -53,8 +54,7 @@ def test_every_exercise_in_one_tab(open_tab, lab_server):
         table = _readout_table(page)
         table.wait_for(timeout=20000)
         assert any(re.search(r"\d", cell) for cell in table.locator("td").all_inner_texts()), exercise.name
-        stopped = page.get_by_text("Stopped:").count() > 0      # an unstable default setting, a lesson
-        assert stopped or _scope_moves(page), f"{exercise.name}: the scope does not update"
+        assert _scope_runs(page), f"{exercise.name}: the scope does not update"
         assert not _clipped(page), (exercise.name, _clipped(page))
         tab.open_panel_tab("Pole map")
         page.get_by_text("dominant poles", exact=False).first.wait_for(timeout=10000)
@@ -66,7 +66,6 @@ def test_every_exercise_in_one_tab(open_tab, lab_server):
             assert not _clipped(page), (exercise.name, _clipped(page))
         tab.open_panel_tab("Worksheet")
         page.get_by_role("heading", name=re.compile("Worksheet|Sensor placement")).first.wait_for(timeout=10000)
-        tab.open_panel_tab("Scope")
     page.close()
     time.sleep(1.0)                                   # the server notices the closed tab
     assert not tab.errors, tab.errors
