@@ -10,7 +10,7 @@ import viser
 from app.session import LabSession
 from lab_modules.exercises import get
 
-CAMERA_POSITION = (5.0, 5.0, 5.0)
+CAMERA_POSITION = (4.0, 4.0, 4.0)
 
 
 def serve(host: str = "127.0.0.1", port: int = 8080, exercise: str = "kalman_noise") -> None:
