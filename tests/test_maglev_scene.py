@@ -1,0 +1,139 @@
+"""The maglev ball's 3D view: geometry from paper 004 (§3.3, Table 3.1,
+eq. 2.7 and 2.10) and the mapping of the trace onto the scene, on a recording
+stand-in for viser's SceneApi."""
+
+import numpy as np
+import pytest
+from test_bearing_scene import Handle, RecordingScene
+
+from lab_modules import maglev_scene as ms
+from lab_modules.exercises import registry
+from lab_modules.maglev import TABLE_3_1
+
+ROOT = ms.ROOT
+
+
+class RemovableHandle(Handle):
+    def remove(self):
+        self.removed = True
+
+
+class Scene(RecordingScene):
+    """The bearing tests' recording scene whose nodes can also be removed (the ruler is redrawn)."""
+
+    def __getattr__(self, method):
+        if not method.startswith("add_"):
+            raise AttributeError(method)
+
+        def add(name, *args, **kwargs):
+            self.nodes[name] = RemovableHandle(method, name, args, kwargs)
+            return self.nodes[name]
+        return add
+
+
+def attached(exercise_name="maglev_tracking", overrides=None):
+    exercise = registry()[exercise_name]
+    view, scene = exercise.scene(exercise.resolve(overrides or {})), Scene()
+    view.attach(scene)
+    return view, scene
+
+
+def ball_top_gap_m(scene) -> float:
+    """Drawn gap between the magnet's face (z = 0) and the top of the drawn ball."""
+    ball = scene.nodes[f"{ROOT}/ball"]
+    return -(ball.position[2] + ball.args[0])
+
+
+def latest(**columns):
+    row = {"time_s": 1.0, "reference_m": 0.0148, "x_true_m": 0.0148, "x_measured_m": 0.0148,
+           "x_estimated_m": 0.0148, "current_true_a": 0.894, "current_estimated_a": 0.894, "guarded": 0.0,
+           "velocity_true_m_per_s": 0.0}
+    return row | columns
+
+
+def test_ball_is_the_papers_19_05_mm_ball_hanging_x1_below_the_coil_face_at_life_size():
+    view, scene = attached()
+    assert scene.nodes[f"{ROOT}/ball"].args[0] == pytest.approx(0.01905 / 2)   # §3.3
+    assert "life size" in scene.nodes[f"{ROOT}/labels/title"].text
+    view.animate(1.0, latest(x_true_m=0.0168))
+    assert ball_top_gap_m(scene) == pytest.approx(0.0168)
+    coil = scene.nodes[f"{ROOT}/magnet/coil"]
+    vertices = coil.args[0] + np.asarray(coil.position)
+    assert vertices[:, 2].min() == pytest.approx(0.0, abs=1e-9)               # the coil's bottom is x1 = 0
+    assert np.hypot(vertices[:, 0], vertices[:, 1]).max() > 2 * ms.BALL_RADIUS_M
+
+
+def test_force_arrows_are_the_two_terms_of_eq_2_10_and_balance_at_the_operating_point():
+    view, scene = attached()
+    gap, current = 0.0148, TABLE_3_1.equilibrium_current_a(0.0148)            # eq. 2.14: 0.894 A
+    view.animate(1.0, latest(x_true_m=gap, current_true_a=current))
+    lengths = {name: float(np.diff(scene.nodes[f"{ROOT}/arrows/{name}"].points[0, :, 2])[0])
+               for name in ("magnetic", "gravity")}
+    weight = 0.05506 * 9.81
+    assert lengths["gravity"] == pytest.approx(-weight * ms.FORCE_SCALE_M_PER_N, rel=1e-6)
+    assert lengths["magnetic"] == pytest.approx(weight * ms.FORCE_SCALE_M_PER_N, rel=1e-4)
+    # half the current: a quarter of the force (eq. 2.7)
+    view.animate(1.04, latest(x_true_m=gap, current_true_a=current / 2))
+    magnetic = scene.nodes[f"{ROOT}/arrows/magnetic"].points[0, :, 2]
+    assert magnetic[1] - magnetic[0] == pytest.approx(weight / 4 * ms.FORCE_SCALE_M_PER_N, rel=1e-4)
+
+
+def test_estimate_ghost_and_measurement_follow_their_columns_and_nan_hides_them():
+    view, scene = attached()
+    view.animate(1.0, latest(x_true_m=0.0150, x_estimated_m=0.0140, x_measured_m=0.0165))
+    ghost, measured = scene.nodes[f"{ROOT}/ghost"], scene.nodes[f"{ROOT}/measured"]
+    assert ghost.visible and measured.visible
+    assert ghost.position[2] == pytest.approx(-0.0140 - ms.BALL_RADIUS_M)   # outline centred on the estimate
+    assert measured.position[2] == pytest.approx(-0.0165)                    # dot where the ball's top would be
+    view.animate(1.04, latest(x_estimated_m=np.nan, x_measured_m=np.nan))
+    assert ghost.visible is False and measured.visible is False
+    legend = scene.nodes[f"{ROOT}/labels/legend"].text
+    assert "estimate" not in legend and "measured" not in legend
+
+
+def test_warning_colour_near_the_guarded_region_and_when_the_ball_struck():
+    view, scene = attached()
+    view.animate(1.0, latest())
+    ball = scene.nodes[f"{ROOT}/ball"]
+    assert ball.color == ms.STEEL and "⚠" not in scene.nodes[f"{ROOT}/labels/legend"].text
+    view.animate(1.04, latest(current_estimated_a=0.05))                    # x̂3 -> 0
+    assert ball.color == ms.WARNING_AMBER and "x̂₃" in scene.nodes[f"{ROOT}/labels/legend"].text
+    view.animate(1.08, latest(guarded=1.0))
+    assert ball.color == ms.WARNING_AMBER
+    view.animate(1.12, latest(x_true_m=0.0029, velocity_true_m_per_s=-5.0))  # 2.9 mm, 5 mm per step upwards
+    assert ball.color == ms.STOPPED_RED and "struck" in scene.nodes[f"{ROOT}/labels/legend"].text
+
+
+def test_small_references_are_drawn_exaggerated_with_a_true_ruler():
+    view, scene = attached(overrides={"reference": "square_0.05mm"})
+    scale = view.scale
+    assert scale.exaggeration == 20 and f"×{scale.exaggeration:g}" in scene.nodes[f"{ROOT}/labels/title"].text
+    view.animate(1.0, latest(x_true_m=0.0148 + 0.05e-3))
+    assert ball_top_gap_m(scene) == pytest.approx(0.0148 + 20 * 0.05e-3)
+    labels = {float(n.args[0]): n.position[2] for name, n in scene.nodes.items()
+              if name.startswith(f"{ROOT}/ruler/label_")}
+    for gap_mm, z in labels.items():                                         # each label sits at its true gap
+        assert -z == pytest.approx(scale.drawn_gap_m(gap_mm * 1e-3))
+    # back to the 2 mm step: life size again, the old ruler removed
+    old = scene.nodes[f"{ROOT}/ruler/label_0"]
+    view.update(registry()["maglev_tracking"].resolve({}))
+    assert view.scale.exaggeration == 1 and old.removed
+    view.animate(1.04, latest(x_true_m=0.0148 + 0.05e-3))
+    assert ball_top_gap_m(scene) == pytest.approx(0.0148 + 0.05e-3)
+
+
+def test_tuning_view_draws_the_recording_estimate_and_measurement():
+    exercise = registry()["maglev_tuning"]
+    values = exercise.resolve({})
+    replay = exercise.simulation(values)
+    row = replay.advance(2000)[-1]
+    columns = {"time_s": row[0], **dict(zip(replay.columns, row[1:]))}
+    view, scene = attached("maglev_tuning")
+    scale = view.scale
+    assert scale.exaggeration > 1                      # the recording wanders by micrometres
+    view.animate(0.0, columns)
+    assert ball_top_gap_m(scene) == pytest.approx(scale.drawn_gap_m(columns["x_estimated_m"]))
+    assert scene.nodes[f"{ROOT}/measured"].position[2] == pytest.approx(-scale.drawn_gap_m(columns["x_measured_m"]))
+    assert f"{ROOT}/ghost" not in scene.nodes
+    coil = scene.nodes[f"{ROOT}/magnet/coil"].color
+    assert coil == ms.coil_color(columns["current_estimated_a"], ms.BIAS_CURRENT_A)
