@@ -41,15 +41,16 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+import viser.transforms as tf
 
 from .bearing_scene import (
     BEARING_FORCE_GREEN,
+    CAMERA_POSITION,
     COIL_HOT,
     DISTURBANCE_PURPLE,
     ESTIMATE_RED,
     MEASURED_GREY,
     NO_SHADOWS,
-    STEEL,
     circle,
     coil_color,
     set_if_changed,
@@ -60,6 +61,7 @@ from .maglev_simulation import MAX_GAP_M, MIN_GAP_M
 from .rotor_scene import tube
 
 ROOT = "/maglev_view"
+FRONT = f"{ROOT}/front"                  # markers, ruler and arrows, in front of the ball
 BALL_RADIUS_M = 0.01905 / 2              # §3.3: measured diameter 1.905 cm
 # Not in the paper (see module docstring):
 CORE_RADIUS_M = 0.010
@@ -67,15 +69,17 @@ COIL_INNER_RADIUS_M, COIL_OUTER_RADIUS_M, COIL_HEIGHT_M = 0.011, 0.025, 0.050
 CORE_HEIGHT_M = 0.056
 DRAWN_GAP_MAX_M = MAX_GAP_M              # the ruler spans 0 ... 30 mm drawn
 RULER_Y_M = -BALL_RADIUS_M - 0.008       # left of the ball
+FRONT_M = BALL_RADIUS_M + 0.001
 FORCE_SCALE_M_PER_N = 0.04               # 40 mm per newton: m g = 0.54 N -> 22 mm
 LONGEST_ARROW_M = 0.03
 WARN_GAP_M = 5 * GUARD_GAP_M             # 5 mm: 3 mm above touchdown (2 mm)
 WARN_CURRENT_A = 10 * GUARD_CURRENT_A    # 0.1 A: 11 % of the operating current
 BIAS_CURRENT_A = TABLE_3_1.equilibrium_current_a(TABLE_3_1.operating_gap_m)   # eq. 2.14: 0.894 A
 CORE_IRON, REFERENCE_BLACK = (110, 110, 115), (0, 0, 0)
+BALL_STEEL = (135, 140, 150)             # darker than the bearing's steel: the ball's lit top stays visible
 WARNING_AMBER, STOPPED_RED = (245, 160, 0), COIL_HOT
 GRAVITY_VIOLET = DISTURBANCE_PURPLE
-FACE_CENTRE_PX = (102, 300)
+FACE_CENTRE_PX = (102, 330)
 PX_PER_MM = 3.0
 
 
@@ -174,31 +178,35 @@ class MaglevScene:
         scene.set_up_direction("+z")
         wxyz, position = view_pose(FACE_CENTRE_PX, 1e-3 / PX_PER_MM)
         scene.add_frame(ROOT, show_axes=False, wxyz=wxyz, position=position)
+        # Markers drawn in front of the ball, yet where the ball's mid plane would show them: the
+        # plane x = 0 scaled towards the camera (c, in the view's frame) onto x = FRONT_M.
+        camera = tf.SO3(np.asarray(wxyz)).as_matrix().T @ (CAMERA_POSITION - position)
+        shrink = (camera[0] - FRONT_M) / camera[0]
+        scene.add_frame(FRONT, show_axes=False, position=tuple((1 - shrink) * camera), scale=shrink)
         vertices, faces = _upright(*tube(CORE_HEIGHT_M, 0.0, CORE_RADIUS_M, 48))
         scene.add_mesh_simple(f"{ROOT}/magnet/core", vertices, faces, color=CORE_IRON,
                               position=(0.0, 0.0, CORE_HEIGHT_M / 2), **NO_SHADOWS)
         vertices, faces = _upright(*tube(COIL_HEIGHT_M, COIL_INNER_RADIUS_M, COIL_OUTER_RADIUS_M, 64))
         h["coil"] = scene.add_mesh_simple(f"{ROOT}/magnet/coil", vertices, faces, color=coil_color(0.0, BIAS_CURRENT_A),
                                           position=(0.0, 0.0, COIL_HEIGHT_M / 2), **NO_SHADOWS)
-        h["ball"] = scene.add_icosphere(f"{ROOT}/ball", BALL_RADIUS_M, STEEL, **NO_SHADOWS)
-        front = BALL_RADIUS_M + 0.001
+        h["ball"] = scene.add_icosphere(f"{ROOT}/ball", BALL_RADIUS_M, BALL_STEEL, **NO_SHADOWS)
         if self.columns.ghost is not None:
-            h["ghost"] = scene.add_frame(f"{ROOT}/ghost", show_axes=False, visible=False)
-            scene.add_line_segments(f"{ROOT}/ghost/outline", circle(BALL_RADIUS_M, front), ESTIMATE_RED,
+            h["ghost"] = scene.add_frame(f"{FRONT}/ghost", show_axes=False, visible=False)
+            scene.add_line_segments(f"{FRONT}/ghost/outline", circle(BALL_RADIUS_M, 0.0), ESTIMATE_RED,
                                     thickness=2.0, thickness_units="screen")
-        h["measured"] = scene.add_icosphere(f"{ROOT}/measured", 0.0015, MEASURED_GREY, visible=False, **NO_SHADOWS)
-        reference = np.array([[[front, RULER_Y_M, 0.0], [front, BALL_RADIUS_M + 0.004, 0.0]]], dtype=np.float32)
-        h["reference"] = scene.add_line_segments(f"{ROOT}/reference", reference, REFERENCE_BLACK, thickness=1.5,
+        h["measured"] = scene.add_icosphere(f"{FRONT}/measured", 0.0015, MEASURED_GREY, visible=False,
+                                            **NO_SHADOWS)
+        reference = np.array([[[0.0, RULER_Y_M, 0.0], [0.0, BALL_RADIUS_M + 0.004, 0.0]]], dtype=np.float32)
+        h["reference"] = scene.add_line_segments(f"{FRONT}/reference", reference, REFERENCE_BLACK, thickness=1.5,
                                                  thickness_units="screen", visible=False)
-        h["arrows"] = {name: scene.add_arrows(f"{ROOT}/arrows/{name}", np.zeros((1, 2, 3), np.float32), color,
+        h["arrows"] = {name: scene.add_arrows(f"{FRONT}/arrows/{name}", np.zeros((1, 2, 3), np.float32), color,
                                               shaft_radius=0.0008, head_radius=0.0018, head_length=0.003,
                                               visible=False)
                        for name, color in (("magnetic", BEARING_FORCE_GREEN), ("gravity", GRAVITY_VIOLET))}
         h["title"] = scene.add_label(f"{ROOT}/labels/title", "", font_screen_scale=0.85, anchor="bottom-center",
                                      position=(0.0, 0.0, CORE_HEIGHT_M + 0.004))
-        h["legend"] = scene.add_label(f"{ROOT}/labels/legend", "", font_screen_scale=0.8, anchor="top-center",
+        h["legend"] = scene.add_label(f"{ROOT}/labels/legend", "", font_screen_scale=0.9, anchor="top-center",
                                       position=(0.0, 0.0, -DRAWN_GAP_MAX_M - 2 * BALL_RADIUS_M - 0.004))
-        self.front_m = front
         self._draw_ruler()
         self.animate(0.0, {})
 
@@ -230,7 +238,7 @@ class MaglevScene:
             if np.isfinite(estimate):
                 lines.append(f"○ estimate x̂₁ = {estimate * 1e3:.2f} mm")
         measured = latest.get(c.measured, float("nan"))
-        self._marker(h["measured"], measured, (self.front_m, 0.0, 0.0))
+        self._marker(h["measured"], measured, (0.0, 0.0, 0.0))
         if np.isfinite(measured):
             lines.append(f"• measured y = {measured * 1e3:.2f} mm")
         reference = latest.get(c.reference, float("nan"))
@@ -269,7 +277,7 @@ class MaglevScene:
                 return f"{name} = {value * scale:.2f} {unit}: near x → 0", WARNING_AMBER
         if gap > MAX_GAP_M - WARN_GAP_M:
             return "the ball is leaving the field", WARNING_AMBER
-        return "", STEEL
+        return "", BALL_STEEL
 
     # -- helpers ---------------------------------------------------------------------------
     def _set(self, handle, attribute: str, value) -> None:
@@ -283,12 +291,12 @@ class MaglevScene:
             self._set(handle, "position", (offset[0], offset[1], offset[2] - self.scale.drawn_gap_m(gap_m)))
 
     def _arrow(self, name: str, force_n: float, across_m: float, centre_m: float) -> None:
-        """A force arrow from the ball's centre, in front of it, ``across_m`` right of its axis."""
+        """A force arrow from the ball's centre, ``across_m`` right of its axis."""
         length = float(np.clip(force_n * FORCE_SCALE_M_PER_N, -LONGEST_ARROW_M, LONGEST_ARROW_M))
         handle = self.handles["arrows"][name]
         self._set(handle, "visible", abs(length) > 0.001)
         if abs(length) > 0.001:
-            start = (self.front_m + 0.001, across_m, centre_m)
+            start = (0.001, across_m, centre_m)
             self._set(handle, "points", np.array([[start, (start[0], across_m, centre_m + length)]], np.float32))
 
     def _draw_ruler(self) -> None:
@@ -297,23 +305,24 @@ class MaglevScene:
             handle.remove()
         scene, scale = self.scene, self.scale
         ticks, labelled = scale.ticks()
-        x = self.front_m
+        x = 0.0
         segments = [[[x, RULER_Y_M, 0.0], [x, RULER_Y_M, -DRAWN_GAP_MAX_M]]]
         for gap in ticks:
             length = 0.004 if any(abs(gap - m) < 1e-12 for m in labelled) else 0.002
             z = -scale.drawn_gap_m(gap)
             segments.append([[x, RULER_Y_M - length, z], [x, RULER_Y_M, z]])
-        self.ruler = [scene.add_line_segments(f"{ROOT}/ruler/ticks", np.array(segments, np.float32), (60, 60, 60),
+        self.ruler = [scene.add_line_segments(f"{FRONT}/ruler/ticks", np.array(segments, np.float32), (60, 60, 60),
                                               thickness=1.0, thickness_units="screen")]
         decimals = max(0, -int(np.floor(np.log10(labelled[1] - labelled[0]) + 3 + 1e-9))) if len(labelled) > 1 else 0
         for k, gap in enumerate(labelled):
             self.ruler.append(scene.add_label(
-                f"{ROOT}/ruler/label_{k}", f"{gap * 1e3:.{decimals}f}", font_screen_scale=0.7,
+                f"{FRONT}/ruler/label_{k}", f"{gap * 1e3:.{decimals}f}", font_screen_scale=0.7,
                 anchor="center-right", position=(x, RULER_Y_M - 0.005, -scale.drawn_gap_m(gap))))
-        self.ruler.append(scene.add_label(f"{ROOT}/ruler/unit", "x₁ [mm]", font_screen_scale=0.7,
+        self.ruler.append(scene.add_label(f"{FRONT}/ruler/unit", "x₁ [mm]", font_screen_scale=0.7,
                                           anchor="bottom-right", position=(x, RULER_Y_M, 0.001)))
 
 
 def _upright(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """A ``tube`` (made along x) turned to stand along z (a cyclic axis swap keeps the faces' winding)."""
-    return np.ascontiguousarray(vertices[:, [1, 2, 0]]), faces
+    """A ``tube`` (made along x) turned to stand along z (a cyclic axis swap), its faces turned
+    outwards: ``tube`` winds them inwards, which seen side-on shows the far inside of the coil."""
+    return np.ascontiguousarray(vertices[:, [1, 2, 0]]), np.ascontiguousarray(faces[:, ::-1])

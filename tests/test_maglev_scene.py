@@ -4,13 +4,15 @@ stand-in for viser's SceneApi."""
 
 import numpy as np
 import pytest
+import viser.transforms as tf
 from test_bearing_scene import Handle, RecordingScene
 
 from lab_modules import maglev_scene as ms
+from lab_modules.bearing_scene import CAMERA_POSITION
 from lab_modules.exercises import registry
 from lab_modules.maglev import TABLE_3_1
 
-ROOT = ms.ROOT
+ROOT, FRONT = ms.ROOT, ms.FRONT
 
 
 class RemovableHandle(Handle):
@@ -67,21 +69,21 @@ def test_force_arrows_are_the_two_terms_of_eq_2_10_and_balance_at_the_operating_
     view, scene = attached()
     gap, current = 0.0148, TABLE_3_1.equilibrium_current_a(0.0148)            # eq. 2.14: 0.894 A
     view.animate(1.0, latest(x_true_m=gap, current_true_a=current))
-    lengths = {name: float(np.diff(scene.nodes[f"{ROOT}/arrows/{name}"].points[0, :, 2])[0])
+    lengths = {name: float(np.diff(scene.nodes[f"{FRONT}/arrows/{name}"].points[0, :, 2])[0])
                for name in ("magnetic", "gravity")}
     weight = 0.05506 * 9.81
     assert lengths["gravity"] == pytest.approx(-weight * ms.FORCE_SCALE_M_PER_N, rel=1e-6)
     assert lengths["magnetic"] == pytest.approx(weight * ms.FORCE_SCALE_M_PER_N, rel=1e-4)
     # half the current: a quarter of the force (eq. 2.7)
     view.animate(1.04, latest(x_true_m=gap, current_true_a=current / 2))
-    magnetic = scene.nodes[f"{ROOT}/arrows/magnetic"].points[0, :, 2]
+    magnetic = scene.nodes[f"{FRONT}/arrows/magnetic"].points[0, :, 2]
     assert magnetic[1] - magnetic[0] == pytest.approx(weight / 4 * ms.FORCE_SCALE_M_PER_N, rel=1e-4)
 
 
 def test_estimate_ghost_and_measurement_follow_their_columns_and_nan_hides_them():
     view, scene = attached()
     view.animate(1.0, latest(x_true_m=0.0150, x_estimated_m=0.0140, x_measured_m=0.0165))
-    ghost, measured = scene.nodes[f"{ROOT}/ghost"], scene.nodes[f"{ROOT}/measured"]
+    ghost, measured = scene.nodes[f"{FRONT}/ghost"], scene.nodes[f"{FRONT}/measured"]
     assert ghost.visible and measured.visible
     assert ghost.position[2] == pytest.approx(-0.0140 - ms.BALL_RADIUS_M)   # outline centred on the estimate
     assert measured.position[2] == pytest.approx(-0.0165)                    # dot where the ball's top would be
@@ -95,7 +97,7 @@ def test_warning_colour_near_the_guarded_region_and_when_the_ball_struck():
     view, scene = attached()
     view.animate(1.0, latest())
     ball = scene.nodes[f"{ROOT}/ball"]
-    assert ball.color == ms.STEEL and "⚠" not in scene.nodes[f"{ROOT}/labels/legend"].text
+    assert ball.color == ms.BALL_STEEL and "⚠" not in scene.nodes[f"{ROOT}/labels/legend"].text
     view.animate(1.04, latest(current_estimated_a=0.05))                    # x̂3 -> 0
     assert ball.color == ms.WARNING_AMBER and "x̂₃" in scene.nodes[f"{ROOT}/labels/legend"].text
     view.animate(1.08, latest(guarded=1.0))
@@ -111,11 +113,11 @@ def test_small_references_are_drawn_exaggerated_with_a_true_ruler():
     view.animate(1.0, latest(x_true_m=0.0148 + 0.05e-3))
     assert ball_top_gap_m(scene) == pytest.approx(0.0148 + 20 * 0.05e-3)
     labels = {float(n.args[0]): n.position[2] for name, n in scene.nodes.items()
-              if name.startswith(f"{ROOT}/ruler/label_")}
+              if name.startswith(f"{FRONT}/ruler/label_")}
     for gap_mm, z in labels.items():                                         # each label sits at its true gap
         assert -z == pytest.approx(scale.drawn_gap_m(gap_mm * 1e-3))
     # back to the 2 mm step: life size again, the old ruler removed
-    old = scene.nodes[f"{ROOT}/ruler/label_0"]
+    old = scene.nodes[f"{FRONT}/ruler/label_0"]
     view.update(registry()["maglev_tracking"].resolve({}))
     assert view.scale.exaggeration == 1 and old.removed
     view.animate(1.04, latest(x_true_m=0.0148 + 0.05e-3))
@@ -133,7 +135,31 @@ def test_tuning_view_draws_the_recording_estimate_and_measurement():
     assert scale.exaggeration > 1                      # the recording wanders by micrometres
     view.animate(0.0, columns)
     assert ball_top_gap_m(scene) == pytest.approx(scale.drawn_gap_m(columns["x_estimated_m"]))
-    assert scene.nodes[f"{ROOT}/measured"].position[2] == pytest.approx(-scale.drawn_gap_m(columns["x_measured_m"]))
-    assert f"{ROOT}/ghost" not in scene.nodes
+    assert scene.nodes[f"{FRONT}/measured"].position[2] == pytest.approx(-scale.drawn_gap_m(columns["x_measured_m"]))
+    assert f"{FRONT}/ghost" not in scene.nodes
     coil = scene.nodes[f"{ROOT}/magnet/coil"].color
     assert coil == ms.coil_color(columns["current_estimated_a"], ms.BIAS_CURRENT_A)
+
+
+def test_markers_in_front_of_the_ball_project_onto_the_pixels_of_the_balls_mid_plane():
+    _, scene = attached()
+    root, front = scene.nodes[ROOT], scene.nodes[FRONT]
+    rotation = tf.SO3(np.asarray(root.wxyz)).as_matrix()
+    for local in ((0.0, ms.RULER_Y_M, -0.0148), (0.0, 0.0, -0.030), (0.0, 0.02, 0.0)):
+        on_mid_plane = root.position + rotation @ np.array(local)
+        in_front = root.position + rotation @ (np.asarray(front.position) + front.scale * np.array(local))
+        assert (rotation.T @ (in_front - root.position))[0] == pytest.approx(ms.FRONT_M)   # before the ball
+        to_mid, to_front = on_mid_plane - CAMERA_POSITION, in_front - CAMERA_POSITION
+        assert np.linalg.norm(np.cross(to_mid, to_front)) / np.linalg.norm(to_mid) ** 2 < 1e-9   # same ray
+
+
+def test_coil_faces_point_outwards_so_the_near_side_is_drawn():
+    _, scene = attached()
+    coil = scene.nodes[f"{ROOT}/magnet/coil"]
+    vertices, faces = coil.args
+    a, b, c = (vertices[faces[:, k]] for k in range(3))
+    normal = np.cross(b - a, c - a)
+    centre = (a + b + c) / 3
+    side = np.abs(normal[:, 2]) < 1e-12 * np.linalg.norm(normal, axis=1).max()
+    outer = side & (np.hypot(centre[:, 0], centre[:, 1]) > ms.COIL_INNER_RADIUS_M + 0.005)
+    assert np.all(np.sum(normal[outer, :2] * centre[outer, :2], axis=1) > 0)
