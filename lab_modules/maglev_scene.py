@@ -80,6 +80,7 @@ BALL_STEEL = (135, 140, 150)             # darker than the bearing's steel: the 
 WARNING_AMBER, STOPPED_RED = (245, 160, 0), COIL_HOT
 GRAVITY_VIOLET = DISTURBANCE_PURPLE
 FACE_CENTRE_PX = (102, 330)
+LEGEND_INTERVAL_S = 0.25
 PX_PER_MM = 3.0
 
 
@@ -168,6 +169,8 @@ class MaglevScene:
         self.scale = drawing_scale(values)
         self.handles: dict = {}
         self.shown: dict = {}
+        self.legend_time_s = -np.inf           # wall time of the last legend text sent
+        self.legend_warning = ""
         self.ruler: list = []
         self.scene = None
 
@@ -217,6 +220,7 @@ class MaglevScene:
             if self.scene is not None:
                 self._draw_ruler()
                 self.shown.clear()          # every position depends on the scale: send them again
+                self.legend_time_s = -np.inf
 
     def animate(self, wall_time_s: float, latest: dict[str, float]) -> None:
         h, c, scale = self.handles, self.columns, self.scale
@@ -254,7 +258,12 @@ class MaglevScene:
         self._set(h["ball"], "color", color)
         if warning:
             lines.append(f"⚠ {warning}")
-        self._set(h["legend"], "text", "\n".join(lines))
+        # The numbers change every frame; rewriting the label's text that often costs a third of the
+        # frame rate in a software-rendered browser, so it is refreshed a few times a second (at once
+        # when the warning changes).
+        if wall_time_s - self.legend_time_s >= LEGEND_INTERVAL_S or warning != self.legend_warning:
+            self.legend_time_s, self.legend_warning = wall_time_s, warning
+            self._set(h["legend"], "text", "\n".join(lines))
 
     def warning(self, latest: dict[str, float]) -> tuple[str, tuple[int, int, int]]:
         """('' or what is wrong, ball colour): near the guarded region x1 -> 0, x3 -> 0 or stopped."""
