@@ -132,7 +132,7 @@ def test_tuning_view_draws_the_recording_estimate_and_measurement():
     columns = {"time_s": row[0], **dict(zip(replay.columns, row[1:]))}
     view, scene = attached("maglev_tuning")
     scale = view.scale
-    assert scale.exaggeration > 1                      # the recording wanders by micrometres
+    assert scale.exaggeration == 100                   # the recording wanders by micrometres (worksheet: ×100)
     view.animate(0.0, columns)
     assert ball_top_gap_m(scene) == pytest.approx(scale.drawn_gap_m(columns["x_estimated_m"]))
     assert scene.nodes[f"{FRONT}/measured"].position[2] == pytest.approx(-scale.drawn_gap_m(columns["x_measured_m"]))
@@ -177,3 +177,16 @@ def test_legend_numbers_refresh_a_few_times_a_second_but_a_warning_at_once():
     assert "⚠" in legend.text                                           # a warning is shown at once
     view.animate(10.08 + ms.LEGEND_INTERVAL_S, latest(x_true_m=0.0152))
     assert "15.20 mm" in legend.text and "⚠" not in legend.text
+
+
+def test_drawn_coil_can_hold_a_winding_of_table_3_1s_resistance_at_a_usual_current_density():
+    """The magnet's size is not in the paper: a copper winding filling 60 % of the drawn window
+    with R_c = 25 ohm must carry the operating current (eq. 2.14) at 2-6 A/mm² (small coils)."""
+    copper_ohm_m, fill = 1.72e-8, 0.6
+    window_m2 = (ms.COIL_OUTER_RADIUS_M - ms.COIL_INNER_RADIUS_M) * ms.COIL_HEIGHT_M
+    turn_m = np.pi * (ms.COIL_OUTER_RADIUS_M + ms.COIL_INNER_RADIUS_M)
+    turns = np.sqrt(TABLE_3_1.coil_resistance_ohm * fill * window_m2 / (copper_ohm_m * turn_m))
+    wire_m2 = fill * window_m2 / turns
+    assert turns == pytest.approx(2300, rel=0.05)                                     # as the docstring says
+    assert 2e6 < ms.BIAS_CURRENT_A / wire_m2 < 6e6
+    assert np.sqrt(4 * wire_m2 / np.pi) == pytest.approx(0.48e-3, rel=0.05)
