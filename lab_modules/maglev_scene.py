@@ -27,7 +27,7 @@ uses the stated mass.
 Warning colour: the ball turns amber when the state nears the region the
 controller guards (x1 -> 0, x3 -> 0; ``maglev.GUARD_GAP_M``,
 ``GUARD_CURRENT_A``), i.e. gap below ``WARN_GAP_M``, current below
-``WARN_CURRENT_A``, or a guarded controller step, and red once the ball has
+``WARN_CURRENT_A``, or a guarded controller step, and dark red once the ball has
 struck the magnet or dropped out of reach (the simulation's touchdown limits).
 
 Framing as the bearing's (``bearing_scene.view_pose``): viser's default
@@ -46,7 +46,6 @@ import viser.transforms as tf
 from .bearing_scene import (
     BEARING_FORCE_GREEN,
     CAMERA_POSITION,
-    COIL_HOT,
     DISTURBANCE_PURPLE,
     ESTIMATE_RED,
     MEASURED_GREY,
@@ -77,7 +76,8 @@ WARN_CURRENT_A = 10 * GUARD_CURRENT_A    # 0.1 A: 11 % of the operating current
 BIAS_CURRENT_A = TABLE_3_1.equilibrium_current_a(TABLE_3_1.operating_gap_m)   # eq. 2.14: 0.894 A
 CORE_IRON, REFERENCE_BLACK = (110, 110, 115), (0, 0, 0)
 BALL_STEEL = (135, 140, 150)             # darker than the bearing's steel: the ball's lit top stays visible
-WARNING_AMBER, STOPPED_RED = (245, 160, 0), COIL_HOT
+WARNING_AMBER = (245, 160, 0)
+STOPPED_RED = (110, 15, 15)              # darker than the estimate's red outline drawn over the ball
 GRAVITY_VIOLET = DISTURBANCE_PURPLE
 FACE_CENTRE_PX = (102, 330)
 LEGEND_INTERVAL_S = 0.25
@@ -151,6 +151,7 @@ class Columns:
     ball: str
     ball_label: str
     current: str
+    current_label: str = "coil x₃"
     measured: str = "x_measured_m"
     reference: str = "reference_m"
     ghost: str | None = None
@@ -253,7 +254,7 @@ class MaglevScene:
         weight = TABLE_3_1.mass_kg * TABLE_3_1.gravity_m_per_s2
         self._arrow("magnetic", magnetic, -0.002, ball_centre)
         self._arrow("gravity", -weight, 0.002, ball_centre)
-        lines += [f"coil x₃ = {current:.3f} A", f"↑ C(x₃/x₁)² = {magnetic:.2f} N", f"↓ m g = {weight:.2f} N"]
+        lines += [f"{c.current_label} = {current:.3f} A", f"↑ C(x₃/x₁)² = {magnetic:.2f} N", f"↓ m g = {weight:.2f} N"]
         warning, color = self.warning(latest)
         self._set(h["ball"], "color", color)
         if warning:

@@ -280,7 +280,8 @@ class MaglevTuning(Exercise):
     def scene(self, values: dict) -> MaglevScene:
         """A recording has no true position: the ball is drawn at the filter's estimate, the
         recorded measurement as a dot, the current is the estimated one."""
-        return MaglevScene(values, Columns(ball="x_estimated_m", ball_label="estimate", current="current_estimated_a"),
+        return MaglevScene(values, Columns(ball="x_estimated_m", ball_label="estimate",
+                                           current="current_estimated_a", current_label="coil x̂₃"),
                            drawing_scale)
 
     def live_readouts(self, trace: dict[str, np.ndarray]) -> list[tuple[str, float, str]]:
