@@ -22,6 +22,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from .controllers import controller_step
 from .estimators import STATE_SIZE, predict, update
 
 OK, DIVERGED, TOUCHDOWN = 0, 1, 2
@@ -99,35 +100,25 @@ def run(n_steps, first_step, plant, plant_A, plant_B_u, plant_B_f, nonlinear, ph
     -------
     (status, steps_done): status OK, DIVERGED (non-finite) or TOUCHDOWN.
     """
-    n_c = ctrl.shape[0]
     T, Tmx, K_mx, K_mi = physics[8], physics[7], physics[9], physics[10]
     y = np.empty(2)
     gain = np.empty((2, STATE_SIZE))
     work_x, work_P = np.empty(STATE_SIZE), np.empty((STATE_SIZE, STATE_SIZE))
-    new_plant, new_ctrl = np.empty(4), np.empty(max(n_c, 1))
+    new_plant, work_ctrl = np.empty(4), np.empty(max(ctrl.shape[0], 1))
     k1, k2, k3, k4, tmp = np.empty(4), np.empty(4), np.empty(4), np.empty(4), np.empty(4)
     for k in range(n_steps):
         # 1. sensors
         y[0] = K_mx * plant[3] + noise_sigma[2] * noise[k, 2]
         y[1] = K_mi * plant[2] + noise_sigma[3] * noise[k, 3]
         # 2. filter correction
-        update(x_hat, P, C_f, y, R_diag, gain)
+        update(x_hat, P, C_f, y, R_diag, gain, STATE_SIZE)
         # 3.-4. feedback and controller
         feedback = K_mx * x_hat[0] if use_estimate else y[0]
         e = K_mx * reference_m[k] - feedback
-        u = Dc[0, 0] * e
-        for r in range(n_c):
-            u += Cc[0, r] * ctrl[r]
+        state_feedback = 0.0
         for j in range(STATE_SIZE):
-            u -= state_gain[j] * x_hat[j]
-        u = min(max(u, -u_limit), u_limit)
-        for r in range(n_c):
-            acc = Bc[r, 0] * e
-            for c in range(n_c):
-                acc += Ac[r, c] * ctrl[c]
-            new_ctrl[r] = acc
-        for r in range(n_c):
-            ctrl[r] = new_ctrl[r]
+            state_feedback += state_gain[j] * x_hat[j]
+        u = controller_step(e, -state_feedback, u_limit, ctrl, Ac, Bc, Cc, Dc, work_ctrl)
         trace[k, 0] = (first_step + k) * T
         trace[k, 1] = plant[0]
         trace[k, 2] = y[0] / K_mx

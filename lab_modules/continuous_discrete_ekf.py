@@ -43,6 +43,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from .estimators import update_scalar
 from .maglev import TABLE_3_1, MaglevPlant, derivative, jacobian
 
 _JIT = {"nogil": True, "cache": True}
@@ -96,26 +97,17 @@ def propagate(x, P, u, p, Q, dt, n_substeps):
         _rk4_step(x, P, u, 0.0, p, Q, 0.0, dt / n_substeps)
 
 
+#: H = dh/dx for h(x) = x1 (the position sensor).
+_POSITION_ROW = np.array([1.0, 0.0, 0.0])
+
+
 @numba.njit(**_JIT)
 def update(x, P, y, r, gain):
-    """Eq. 2.40-2.42 for h(x) = x1 (H = [1 0 0]), Joseph form, in place.
+    """Eq. 2.40-2.42 for h(x) = x1 (H = [1 0 0]), Joseph form, in place: the linear
+    filter's scalar correction (``estimators.update_scalar``) with 3 states.
 
     Writes the Kalman gain into ``gain``; returns (innovation, its variance S)."""
-    innovation = y - x[0]
-    s = P[0, 0] + r
-    for i in range(3):
-        gain[i] = P[i, 0] / s
-        x[i] += gain[i] * innovation
-    # (I - K H) P (I - K H)^T + K r K^T with H = e1:  P_ij - K_i P_0j - P_i0 K_j + K_i K_j s
-    P0 = np.empty(3)
-    for i in range(3):
-        P0[i] = P[i, 0]
-    for i in range(3):
-        for j in range(i, 3):
-            value = P[i, j] - gain[i] * P0[j] - P0[i] * gain[j] + gain[i] * gain[j] * s
-            P[i, j] = value
-            P[j, i] = value
-    return innovation, s
+    return update_scalar(x, P, _POSITION_ROW, y, r, gain, 3)
 
 
 @numba.njit(**_JIT)

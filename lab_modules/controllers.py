@@ -9,8 +9,8 @@ Two kinds, both ending in the amplifier reference i_ref [V]:
   part is again a discrete ``control.StateSpace`` on e [V]; the state gain
   acts on the Kalman filter's estimate.
 
-The simulation kernel only ever sees matrices, so any of them plugs into the
-same loop.
+The simulation kernels only ever see matrices, so any of them plugs into the
+same loop; ``controller_step`` is their compiled step.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import control
+import numba
 import numpy as np
 
 from .amb_axis import RIG, BearingAxis
@@ -49,6 +50,31 @@ def pid(gain: float, integral_time_s: float, derivative_time_s: float,
     continuous = gain * (1 + 1 / (integral_time_s * s)
                          + derivative_time_s * s / (derivative_filter_s * s + 1))
     return control.ss(control.c2d(continuous, sample_time_s, method="tustin"))
+
+
+@numba.njit(inline="always")
+def controller_step(e, offset_v, u_limit, ctrl, Ac, Bc, Cc, Dc, work):
+    """One sample of a discrete SISO controller (Ac, Bc, Cc, Dc) in a compiled loop.
+
+    Returns the output Cc ctrl + Dc e + offset_v for the error e (e [V] and
+    i_ref [V] in the bearing loops), clipped at ±u_limit (the amplifier limit;
+    inf: none), and advances the state
+    ctrl <- Ac ctrl + Bc e in place (``work``: scratch of ctrl's size).  The
+    offset carries what the loop adds to the controller: a state feedback
+    -K_s x_hat (eq. 22), a feedforward or an operating point.  Inlined into
+    the caller, so it is compiled with the caller's options."""
+    n_c = ctrl.shape[0]
+    u = Dc[0, 0] * e + offset_v
+    for r in range(n_c):
+        u += Cc[0, r] * ctrl[r]
+    for r in range(n_c):
+        acc = Bc[r, 0] * e
+        for c in range(n_c):
+            acc += Ac[r, c] * ctrl[c]
+        work[r] = acc
+    for r in range(n_c):
+        ctrl[r] = work[r]
+    return min(max(u, -u_limit), u_limit)
 
 
 @dataclass(frozen=True)

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from functools import lru_cache
 
 import control
 import numba
@@ -31,7 +30,7 @@ from scipy.signal import max_len_seq
 from . import extended_filters as ef
 from .amb_axis import RIG, BearingAxis
 from .closed_loop import _rk4_step
-from .controllers import pid
+from .controllers import controller_step
 from .extended_filters import N_STATES
 
 OK, DIVERGED, TOUCHDOWN, FILTER_DIVERGED = 0, 1, 2, 3
@@ -67,35 +66,23 @@ def run(n_steps, model, plant, plant_physics, x_hat, P, Q, R_diag, C, filter_phy
 
     Returns (status, steps_done).
     """
-    n_c = ctrl.shape[0]
     T, Tmx, K_mx, K_mi = plant_physics[8], plant_physics[7], plant_physics[9], plant_physics[10]
     y, gain = np.empty(2), np.empty((2, N_STATES))
     F, Phi, work = np.empty((N_STATES, N_STATES)), np.empty((N_STATES, N_STATES)), \
         np.empty((6, N_STATES, N_STATES))
-    new_ctrl = np.empty(max(n_c, 1))
+    work_ctrl = np.empty(max(ctrl.shape[0], 1))
     k1, k2, k3, k4, tmp = np.empty(4), np.empty(4), np.empty(4), np.empty(4), np.empty(4)
     nan = np.nan
     for k in range(n_steps):
         # 1.-2. sensors and filter correction
         y[0] = K_mx * plant[3] + noise_sigma[2] * noise[k, 2]
         y[1] = K_mi * plant[2] + noise_sigma[3] * noise[k, 3]
-        nis = ef.update(x_hat, P, C, y, R_diag, gain)
+        nis = ef.update(x_hat, P, C, y, R_diag, gain, N_STATES)
         # 3.-4. feedback, PID and feedforward
         feedback = K_mx * x_hat[0] if use_estimate else y[0]
         e = K_mx * reference_m[k] - feedback
-        u = Dc[0, 0] * e
-        for r in range(n_c):
-            u += Cc[0, r] * ctrl[r]
-        if model == ef.NONLINEAR:
-            u += feedforward_v_per_n * x_hat[4]
-        u = min(max(u, -u_limit), u_limit)
-        for r in range(n_c):
-            acc = Bc[r, 0] * e
-            for c in range(n_c):
-                acc += Ac[r, c] * ctrl[c]
-            new_ctrl[r] = acc
-        for r in range(n_c):
-            ctrl[r] = new_ctrl[r]
+        feedforward = feedforward_v_per_n * x_hat[4] if model == ef.NONLINEAR else 0.0
+        u = controller_step(e, feedforward, u_limit, ctrl, Ac, Bc, Cc, Dc, work_ctrl)
         row = trace[k]
         row[0], row[1], row[2] = plant[0], y[0] / K_mx, x_hat[0]
         row[3], row[4], row[5] = np.sqrt(max(P[0, 0], 0.0)), plant[2], u
@@ -127,11 +114,6 @@ def run(n_steps, model, plant, plant_physics, x_hat, P, Q, R_diag, C, filter_phy
         if abs(plant[0]) >= touchdown_m:
             return TOUCHDOWN, k + 1
     return OK, n_steps
-
-
-#: ``controllers.pid`` remembered per setting: its discretisation takes tens of
-#: milliseconds, and the analyses build the same PID for several runs.
-cached_pid = lru_cache(maxsize=16)(pid)
 
 
 def no_input(t: np.ndarray) -> np.ndarray:

@@ -27,23 +27,23 @@ import numpy as np
 _JIT = {"nogil": True, "cache": True, "fastmath": True}
 
 
-#: The compiled kernels work on exactly this many states, a compile-time
-#: constant so that the compiler unrolls the loops (about 2x faster than loops
-#: of run-time length).  Smaller models are padded with decoupled states whose
-#: rows of P stay zero; ``KalmanFilter`` does the padding.
+#: The linear filter's kernels work on exactly this many states.  Smaller
+#: models are padded with decoupled states whose rows of P stay zero;
+#: ``KalmanFilter`` does the padding.
 STATE_SIZE = 4
 
-@numba.njit(**_JIT)
-def predict(x, P, A, B, u, Q, work_x, work_P):
-    """Eq. 2, prediction: x <- A x + B u,  P <- A P A^T + Q (in place)."""
-    n = STATE_SIZE
+
+# The kernels below serve any number of states ``n_states``; the extended
+# filters (``extended_filters``, 5 states; ``continuous_discrete_ekf``, 3)
+# share them.  Numba inlines them into each compiled caller
+# (``inline="always"``), so the caller's constant (``STATE_SIZE``, ...) fixes the loop lengths at compile time and the
+# compiler unrolls them (about 2x faster than loops of run-time length).
+
+@numba.njit(inline="always", **_JIT)
+def propagate_covariance(P, A, Q, work_P, n_states):
+    """P <- A P A^T + Q in place (eq. 2; eq. 6 with A = Phi), exactly symmetric."""
+    n = n_states
     for r in range(n):
-        work_x[r] = B[r] * u
-    for c in range(n):
-        for r in range(n):
-            work_x[r] += A[r, c] * x[c]
-    for r in range(n):
-        x[r] = work_x[r]
         for c in range(n):
             work_P[r, c] = 0.0
         for k in range(n):
@@ -60,15 +60,29 @@ def predict(x, P, A, B, u, Q, work_x, work_P):
 
 
 @numba.njit(**_JIT)
-def update_scalar(x, P, c_row, y, r, gain):
-    """Eq. 2, correction with one scalar measurement y = c x + eta, var(eta) = r.
+def predict(x, P, A, B, u, Q, work_x, work_P):
+    """Eq. 2, prediction: x <- A x + B u,  P <- A P A^T + Q (in place, ``STATE_SIZE`` states)."""
+    n = STATE_SIZE
+    for r in range(n):
+        work_x[r] = B[r] * u
+    for c in range(n):
+        for r in range(n):
+            work_x[r] += A[r, c] * x[c]
+    for r in range(n):
+        x[r] = work_x[r]
+    propagate_covariance(P, A, Q, work_P, STATE_SIZE)
+
+
+@numba.njit(inline="always", **_JIT)
+def update_scalar(x, P, c_row, y, r, gain, n_states):
+    """Eq. 2 (and eq. 6), correction with one scalar measurement y = c x + eta, var(eta) = r.
 
     Joseph form P = M P M^T + r K K^T with M = I - K c.  Because M is the
     identity minus a rank-one matrix, both products cost O(n^2):
     M P = P - K a^T with a = P c^T = s K, and (M P) M^T = W - (W c^T) K^T
     with W c^T = a - K (c P c^T).
     Writes the Kalman gain into ``gain``; returns the innovation and its variance."""
-    n = STATE_SIZE
+    n = n_states
     innovation = y
     for i in range(n):
         innovation -= c_row[i] * x[i]
@@ -96,11 +110,16 @@ def update_scalar(x, P, c_row, y, r, gain):
     return innovation, s
 
 
-@numba.njit(**_JIT)
-def update(x, P, C, y, R_diag, gain):
-    """Eq. 2, correction with the measurement vector y (diagonal R)."""
+@numba.njit(inline="always", **_JIT)
+def update(x, P, C, y, R_diag, gain, n_states):
+    """Eq. 2 (and eq. 6), correction with the measurement vector y (diagonal R),
+    one scalar measurement at a time.  Writes the gains (one row per
+    measurement) into ``gain``; returns the normalised innovation squared (NIS)."""
+    nis = 0.0
     for m in range(C.shape[0]):
-        update_scalar(x, P, C[m], y[m], R_diag[m], gain[m])
+        innovation, s = update_scalar(x, P, C[m], y[m], R_diag[m], gain[m], n_states)
+        nis += innovation * innovation / s
+    return nis
 
 
 class KalmanFilter:
@@ -144,8 +163,7 @@ class KalmanFilter:
 
     def update(self, y) -> None:
         """Correction step of eq. 2 with measurement vector y."""
-        update(self._x, self.P, self.C, np.asarray(y, dtype=float), self.R_diag,
-               self.gain)
+        update(self._x, self.P, self.C, np.asarray(y, dtype=float), self.R_diag, self.gain, STATE_SIZE)
 
 
 def pad_square(M) -> np.ndarray:

@@ -20,11 +20,14 @@ Both run the algorithm of eq. 6::
 
 with F = df/dx evaluated at x_{k-1|k-1} (eq. 7).  R is diagonal (eq. 16), so
 the correction processes the two measurements one scalar at a time, which
-equals the matrix form above and needs no inverse.  The paper specifies RK4
+equals the matrix form above and needs no inverse.  Because g is linear
+(Gamma = G), the correction is the linear filter's (``estimators.update``,
+here with 5 states), and the prediction's covariance step is its
+``estimators.propagate_covariance`` with Phi.  The paper specifies RK4
 and eq. 15 for §III-B only; the lab uses the same discretisation for §III-A so
 that the two filters differ only in their model.
 
-The compiled kernels (``predict``, ``update``) work in place so that the
+The compiled kernels (``predict`` here, ``update``) work in place so that the
 closed loop (``lab_modules.ekf_loop``) can call them every 50 µs; the two
 classes wrap them for step-by-step use.  ``physics`` is the float64 vector
 (m, c_f, i0, delta0, cos(alpha), T_a, K_a, T_mx, T, K_mx, K_mi) of
@@ -37,6 +40,7 @@ import numba
 import numpy as np
 
 from .amb_axis import DEFAULT_SENSOR_LAG_S, RIG, BearingAxis
+from .estimators import propagate_covariance, update
 
 _JIT = {"nogil": True, "cache": True}
 
@@ -154,64 +158,10 @@ def rk4_step(model, s, u, p, work):
 def predict(model, x, P, u, Q, p, F, Phi, work):
     """Eq. 6, prediction, in place: Phi from F at x_{k-1|k-1} (eq. 7, 15), then
     x <- RK4(f, x, u) and P <- Phi P Phi^T + Q.  ``work``: (6, 5, 5) scratch."""
-    n = N_STATES
     jacobian(model, x, p, F)
     transition_matrix(F, p[8], Phi)
     rk4_step(model, x, u, p, work[0])
-    phi_P = work[1]
-    for r in range(n):
-        for c in range(n):
-            acc = 0.0
-            for k in range(n):
-                acc += Phi[r, k] * P[k, c]
-            phi_P[r, c] = acc
-    for r in range(n):
-        for c in range(r, n):
-            acc = Q[r, c]
-            for k in range(n):
-                acc += phi_P[r, k] * Phi[c, k]
-            P[r, c] = acc
-            P[c, r] = acc
-
-
-@numba.njit(**_JIT)
-def update(x, P, C, y, R_diag, gain):
-    """Eq. 6, correction with y = C x + eta (g of eq. 9/14 is linear, Gamma = C),
-    one scalar measurement at a time (diagonal R), Joseph form.
-
-    For a row c with variance r: a = P c^T, s = c a + r, K = a / s,
-    x += K (y_c - c x), P <- (I - K c) P (I - K c)^T + r K K^T, evaluated as
-    P - K a^T - a K^T + s K K^T (exactly the Joseph product for this K).
-    Writes the gains (one row per measurement) into ``gain`` and returns the
-    normalised innovation squared (NIS) of the whole measurement vector."""
-    n = N_STATES
-    nis = 0.0
-    for m in range(C.shape[0]):
-        innovation = y[m]
-        for i in range(n):
-            innovation -= C[m, i] * x[i]
-        a = gain[m]                                # a = P c^T, turned into K = a / s below
-        for i in range(n):
-            acc = 0.0
-            for j in range(n):
-                acc += P[i, j] * C[m, j]
-            a[i] = acc
-        s = R_diag[m]
-        for i in range(n):
-            s += C[m, i] * a[i]
-        for i in range(n):
-            a_i = a[i]
-            for j in range(i, n):
-                a_j = a[j]
-                k_i, k_j = a_i / s, a_j / s
-                value = P[i, j] - k_i * a_j - a_i * k_j + s * k_i * k_j
-                P[i, j] = value
-                P[j, i] = value
-        for i in range(n):
-            a[i] /= s
-            x[i] += a[i] * innovation
-        nis += innovation * innovation / s
-    return nis
+    propagate_covariance(P, Phi, Q, work[1], N_STATES)
 
 
 class _ExtendedFilter:
@@ -242,7 +192,7 @@ class _ExtendedFilter:
 
     def update(self, y) -> None:
         """Correction of eq. 6 with y = (position [V], current [V])."""
-        self.nis = update(self.x, self.P, self.C, np.asarray(y, dtype=float), self.R_diag, self.gain)
+        self.nis = update(self.x, self.P, self.C, np.asarray(y, dtype=float), self.R_diag, self.gain, N_STATES)
 
 
 class ParameterEKF(_ExtendedFilter):

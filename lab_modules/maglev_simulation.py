@@ -25,6 +25,7 @@ import numba
 import numpy as np
 
 from .continuous_discrete_ekf import bucy_step, propagate, update
+from .controllers import controller_step
 from .maglev import LEAD_LAG, TABLE_3_1, LeadLag, MaglevPlant, feedback_gain, linearising_control, rk4_step
 
 OK, STRUCK_MAGNET, FELL, DIVERGED = 0, 1, 2, 3
@@ -186,8 +187,7 @@ def run(n_steps, t0, x, x_hat, P, xc, refs, noise, p_true, p, k, Q, plant_q, r, 
     x_next = np.empty(3)
     sigma = np.sqrt(r)
     sq_v, sq_i = np.sqrt(plant_q[1] * dt), np.sqrt(plant_q[2] * dt)
-    nc = xc.shape[0]
-    xc_next = np.empty(nc)
+    xc_next = np.empty(xc.shape[0])
     for step in range(n_steps):
         y = x[0] + sigma * noise[step, 0]
         innovation, s = 0.0, P[0, 0] + r
@@ -197,16 +197,7 @@ def run(n_steps, t0, x, x_hat, P, xc, refs, noise, p_true, p, k, Q, plant_q, r, 
         if controller == 0:
             u, guarded = linearising_control(x_hat, refs[step], k, p)
         else:
-            e = y - refs[step, 0]
-            u = u0 + Dc[0, 0] * e
-            for i in range(nc):
-                u += Cc[0, i] * xc[i]
-            for i in range(nc):
-                acc = Bc[i, 0] * e
-                for j in range(nc):
-                    acc += Ac[i, j] * xc[j]
-                xc_next[i] = acc
-            xc[:] = xc_next
+            u = controller_step(y - refs[step, 0], u0, np.inf, xc, Ac, Bc, Cc, Dc, xc_next)
         row = trace[step]
         row[0] = t0 + step * dt
         row[1] = refs[step, 0]

@@ -55,12 +55,13 @@ from ..ekf_loop import (
     Sine,
     SquareWave,
     Step,
-    cached_pid,
     column,
     no_input,
 )
 from ..parameters import Parameter
 from . import Analysis, Chart, Exercise, Plot, Series
+from ._common import ekf_loop_fields
+from .ekf_parameters import PARAMETERS as EKF_PARAMETERS_EXERCISE_PARAMETERS
 from .kalman_noise import PARAMETERS as NOISE_EXERCISE_PARAMETERS
 
 T = RIG.sample_time_s
@@ -71,6 +72,7 @@ PLOT_POINTS = 800
 FIG_4_WINDOW_S = (0.005, 0.06)        # shown before and after the step
 
 _shared = {p.name: p for p in NOISE_EXERCISE_PARAMETERS}
+_ekf = {p.name: p for p in EKF_PARAMETERS_EXERCISE_PARAMETERS}      # same filter noise sliders
 P = Parameter
 PARAMETERS = (
     P("experiment", "Experiment", "", "force_step", choices=("force_step", "gap_sweep"),
@@ -90,15 +92,7 @@ PARAMETERS = (
     P("filter_q_force", "Filter q_55 (f_z)", "N²", 1.0, 1e-4, 1e4,
       "Process noise of f_z per sample (eq. 17: 1 N²); larger: faster, noisier estimate (Fig. 4).",
       log=True, group="Extended Kalman filter"),
-    P("filter_q_velocity", "Filter q_22 (v)", "m²/s²", 2.6e-10, 1e-16, 1e-6,
-      "Process noise of v per sample (eq. 17: 2.6e-10 m²/s²).", log=True, group="Extended Kalman filter"),
-    P("filter_q_current", "Filter q_33 (i)", "A²", 1e-3, 1e-8, 1.0,
-      "Process noise of i per sample (eq. 17: 0.43 A² on the rig; lab default 1e-3 A², see worksheet).",
-      log=True, group="Extended Kalman filter"),
-    P("filter_r_position", "Filter R_x", "V²", 7.1e-4, 1e-7, 1e-1,
-      "Position-measurement variance (eq. 16: 7.1e-4 V²).", log=True, group="Extended Kalman filter"),
-    P("filter_r_current", "Filter R_i", "V²", 1.4e-1, 1e-4, 10.0,
-      "Current-measurement variance (eq. 16: 0.14 V²).", log=True, group="Extended Kalman filter"),
+    _ekf["filter_q_velocity"], _ekf["filter_q_current"], _ekf["filter_r_position"], _ekf["filter_r_current"],
     P("filter_sensor_lag_us", "Filter's T_mx", "µs", DEFAULT_SENSOR_LAG_S * 1e6, 50.0, 1000.0,
       "Sensor lag assumed by the filter, eq. 12 (not in the paper; 200 µs).", step=10.0,
       group="Extended Kalman filter"),
@@ -131,18 +125,14 @@ def setup(values: dict, experiment: str | None = None, step_n: float | None = No
         reference, disturbance = no_input, SquareWave(step_n, values["step_period_ms"] * 1e-3)
     return EKFLoopSetup(
         model=ef.NONLINEAR,
-        controller=cached_pid(values["pid_gain"], values["integral_time_ms"] * 1e-3,
-                       values["derivative_time_ms"] * 1e-3, values["derivative_filter_us"] * 1e-6, T),
         filter_x0=np.zeros(ef.N_STATES),
         filter_P0=np.diag([10e-6, 1e-3, 0.1, 10e-6, 100.0]) ** 2,
         filter_Q=np.diag([0.0, values["filter_q_velocity"], values["filter_q_current"], 0.0,
                           values["filter_q_force"]]),
-        filter_R_diag=np.array([values["filter_r_position"], values["filter_r_current"]]),
         filter_sensor_lag_s=values["filter_sensor_lag_us"] * 1e-6,
         plant_sensor_lag_s=values["sensor_lag_us"] * 1e-6,
-        use_estimate=values["feedback"] == "estimated", feedforward=values["feedforward"] == "on",
-        sensor_noise_m=values["sensor_noise_um"] * 1e-6, current_noise_a=values["current_noise_a"],
-        process_force_n=values["disturbance_force_n"],
+        feedforward=values["feedforward"] == "on",
+        **ekf_loop_fields(values),
         reference=reference, disturbance=disturbance, experiment=experiment)
 
 

@@ -38,9 +38,10 @@ import numpy as np
 from .. import extended_filters as ef
 from ..amb_axis import RIG
 from ..bearing_scene import ESTIMATE_RED, MEASURED_GREY, BearingScene, Ghost
-from ..ekf_loop import EKFLoopSetup, EKFLoopSimulation, Prbs, cached_pid, column
+from ..ekf_loop import EKFLoopSetup, EKFLoopSimulation, Prbs, column
 from ..parameters import Parameter
 from . import Analysis, Chart, Exercise, Plot, Series
+from ._common import ekf_loop_fields
 from .kalman_noise import PARAMETERS as NOISE_EXERCISE_PARAMETERS
 
 T = RIG.sample_time_s
@@ -100,16 +101,11 @@ def setup(values: dict, excitation: bool = True) -> EKFLoopSetup:
     amplitude = values["prbs_amplitude_um"] * 1e-6 if excitation else 0.0
     return EKFLoopSetup(
         model=ef.LINEARISED,
-        controller=cached_pid(values["pid_gain"], values["integral_time_ms"] * 1e-3,
-                       values["derivative_time_ms"] * 1e-3, values["derivative_filter_us"] * 1e-6, T),
         filter_x0=initial, filter_P0=np.diag(sigma0**2),
         filter_Q=np.diag([0.0, values["filter_q_velocity"], values["filter_q_current"],
                           values["filter_q_ki"], values["filter_q_kx"]]),
-        filter_R_diag=np.array([values["filter_r_position"], values["filter_r_current"]]),
         plant_sensor_lag_s=values["sensor_lag_us"] * 1e-6,
-        use_estimate=values["feedback"] == "estimated",
-        sensor_noise_m=values["sensor_noise_um"] * 1e-6, current_noise_a=values["current_noise_a"],
-        process_force_n=values["disturbance_force_n"],
+        **ekf_loop_fields(values),
         reference=Prbs(amplitude, values["prbs_bit_time_ms"] * 1e-3, values["reference_offset_um"] * 1e-6))
 
 

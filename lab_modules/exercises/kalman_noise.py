@@ -19,8 +19,6 @@ model with the steady-state filter (discrete Lyapunov equation).
 
 from __future__ import annotations
 
-import functools
-
 import numpy as np
 
 from .. import analysis
@@ -28,9 +26,9 @@ from ..amb_axis import DEFAULT_SENSOR_LAG_S, RIG
 from ..axis_simulation import AxisSetup, AxisSimulation
 from ..bearing_scene import ESTIMATE_RED, MEASURED_GREY, BearingScene, Ghost
 from ..closed_loop import TRACE_COLUMNS
-from ..controllers import pid
 from ..parameters import Parameter
 from . import Analysis, Chart, Exercise, Series
+from ._common import pid_from_values
 
 T = RIG.sample_time_s
 K_MX = RIG.position_sensor_gain_v_per_m
@@ -102,17 +100,10 @@ GAIN_CRITERION = ("largest common gain factor at which the noise-driven RMS roto
                   "stays at or below the position sensor's noise sigma (unstable loops exceed it)")
 
 
-#: The PID for given gains, remembered: most slider moves leave the gains alone,
-#: and the Tustin discretisation is a noticeable part of a readout update.
-cached_pid = functools.lru_cache(maxsize=128)(pid)
-
-
 def setup(values: dict) -> AxisSetup:
     """The physical set-up described by the exercise's parameter values."""
-    controller = cached_pid(values["pid_gain"] * values["gain_factor"], values["integral_time_ms"] * 1e-3,
-                     values["derivative_time_ms"] * 1e-3, values["derivative_filter_us"] * 1e-6, T)
     return AxisSetup(
-        controller=controller,
+        controller=pid_from_values(values, values["gain_factor"]),
         use_estimate=values["feedback"] == "estimated",
         nonlinear=values["force_law"] == "nonlinear",
         sensor_lag_s=values["sensor_lag_us"] * 1e-6,

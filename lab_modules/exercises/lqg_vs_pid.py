@@ -37,6 +37,7 @@ from ..closed_loop import OK, TRACE_COLUMNS
 from ..controllers import PAPER_LQG, PAPER_LQR_WEIGHTS, StateFeedback, integral_augmented_model, lqr
 from ..parameters import Parameter
 from . import Analysis, Chart, Exercise, Plot, Series, kalman_noise
+from ._common import pid_from_values
 
 T = RIG.sample_time_s
 LOOPS = ("LQG", "PID")
@@ -124,8 +125,7 @@ def setups(values: dict) -> dict[str, AxisSetup]:
         step_period_s=values["step_period_ms"] * 1e-3,
     )
     lqg = regulator(values)
-    pid = kalman_noise.cached_pid(values["pid_gain"], values["integral_time_ms"] * 1e-3,
-                                  values["derivative_time_ms"] * 1e-3, values["derivative_filter_us"] * 1e-6, T)
+    pid = pid_from_values(values)
     return {
         "LQG": common.with_changes(controller=lqg.integrator(), state_gain=lqg.state_gain,
                                    use_estimate=values["integrator_input"] == "estimated"),

@@ -44,7 +44,6 @@ import scipy.signal
 
 from .. import analysis
 from ..amb_axis import RIG
-from ..controllers import pid
 from ..flexible_rotor import (
     LOOP_OUTPUTS,
     FlexibleRotor,
@@ -59,6 +58,7 @@ from ..flexible_rotor import (
 from ..parameters import Parameter
 from ..rotor_scene import RotorScene
 from . import Analysis, Chart, Exercise, Plot, Series
+from ._common import pid_from_values
 
 T = RIG.sample_time_s
 K_MX, K_MI = RIG.position_sensor_gain_v_per_m, RIG.current_sensor_gain_v_per_a
@@ -127,10 +127,6 @@ def rotor(modal_damping: float) -> FlexibleRotor:
     return FlexibleRotor(replace(GEOMETRY, modal_damping=modal_damping))
 
 
-#: The PID for given gains, remembered (its Tustin discretisation is slow next to the rest).
-cached_pid = lru_cache(maxsize=64)(pid)
-
-
 @lru_cache(maxsize=256)
 def _plant(modal_damping: float, sensor_offset_mm: float, modes: int, sensor_lag_s: float):
     return discrete_plant(rotor(modal_damping), GEOMETRY.bearing_m + sensor_offset_mm * 1e-3, modes,
@@ -165,8 +161,7 @@ def compensator(values: dict, gain_factor: float | None = None,
                 sensor_offset_mm: float | None = None) -> control.StateSpace:
     """PID (scaled by the gain factor) on the measurement or on the filter's estimate."""
     factor = values["gain_factor"] if gain_factor is None else gain_factor
-    controller = cached_pid(values["pid_gain"], values["integral_time_ms"] * 1e-3,
-                            values["derivative_time_ms"] * 1e-3, values["derivative_filter_us"] * 1e-6, T) * factor
+    controller = pid_from_values(values) * factor
     if values["feedback"] == "measured":
         return pid_compensator(controller)
     model, gain, _, _ = _filter(values["sensor_lag_us"] * 1e-6, sensor_noise_m(values, sensor_offset_mm),
