@@ -74,17 +74,19 @@ BEARING_CENTRE_PX = (102, 430)      # in the strip left of the control panel
 STATOR_DIAMETER_PX = 170
 
 
-def view_pose() -> tuple[np.ndarray, np.ndarray]:
-    """(wxyz, position) of the bearing frame: its x axis (the shaft) towards the
-    camera, y to the right, z up on the screen, centred on ``BEARING_CENTRE_PX``."""
+def view_pose(centre_px: tuple[float, float] = BEARING_CENTRE_PX,
+              metres_per_px: float = 2 * STATOR_RADIUS_M / STATOR_DIAMETER_PX) -> tuple[np.ndarray, np.ndarray]:
+    """(wxyz, position) of a view frame: its x axis (the bearing's shaft) towards the
+    camera, y to the right, z up on the screen, its origin on pixel ``centre_px``
+    (default: ``BEARING_CENTRE_PX``), drawn at ``metres_per_px`` life-size metres per pixel."""
     forward = -CAMERA_POSITION / np.linalg.norm(CAMERA_POSITION)
     right = np.cross(forward, (0.0, 0.0, 1.0))
     right /= np.linalg.norm(right)
     up = np.cross(right, forward)
     focal_px = CANVAS_PX[1] / 2 / np.tan(CAMERA_FOV_RAD / 2)
-    across = (BEARING_CENTRE_PX[0] - CANVAS_PX[0] / 2) / focal_px
-    down = (BEARING_CENTRE_PX[1] - CANVAS_PX[1] / 2) / focal_px
-    depth = focal_px * 2 * STATOR_RADIUS_M / STATOR_DIAMETER_PX     # life size, near the camera
+    across = (centre_px[0] - CANVAS_PX[0] / 2) / focal_px
+    down = (centre_px[1] - CANVAS_PX[1] / 2) / focal_px
+    depth = focal_px * metres_per_px     # life size, near the camera
     position = CAMERA_POSITION + depth * (forward + across * right - down * up)
     rotation = tf.SO3.from_matrix(np.column_stack([-forward, right, up]))
     return rotation.wxyz, position
@@ -106,9 +108,9 @@ def pole_angles_rad() -> dict[str, tuple[float, float]]:
     return {name: (centre - alpha, centre + alpha) for name, centre in MAGNETS.items()}
 
 
-def coil_color(current_a: float) -> tuple[int, int, int]:
-    """Pale at no current, copper at the bias i0, red at 2 i0 and beyond."""
-    level = min(abs(current_a) / RIG.i0_a, 2.0)
+def coil_color(current_a: float, bias_a: float = RIG.i0_a) -> tuple[int, int, int]:
+    """Pale at no current, copper at the bias ``bias_a`` (default the bearing's i0), red at twice it and beyond."""
+    level = min(abs(current_a) / bias_a, 2.0)
     low, high, t = (COIL_IDLE, COPPER, level) if level <= 1.0 else (COPPER, COIL_HOT, level - 1.0)
     return tuple(round(a + (b - a) * t) for a, b in zip(low, high))
 
@@ -254,11 +256,7 @@ class BearingScene:
 
     # -- helpers ---------------------------------------------------------------------------
     def _set(self, handle, attribute: str, value) -> None:
-        """Send a property only when it changed (the scene is updated every frame)."""
-        key = (id(handle), attribute)
-        if key not in self.shown or not np.array_equal(self.shown[key], value):
-            self.shown[key] = value
-            setattr(handle, attribute, value)
+        set_if_changed(self.shown, handle, attribute, value)
 
     def _arrow(self, name: str, force_n: float, across_m: float, lift_m: float) -> None:
         """A force arrow on the rotor's face, ``across_m`` right of its centre."""
@@ -269,6 +267,14 @@ class BearingScene:
             start = (self.front_m + 0.01, across_m, lift_m)
             points = np.array([[start, (start[0], across_m, lift_m + length)]], dtype=np.float32)
             self._set(handle, "points", points)
+
+
+def set_if_changed(shown: dict, handle, attribute: str, value) -> None:
+    """Send a node property only when it changed (``shown`` remembers what was sent; scenes update every frame)."""
+    key = (id(handle), attribute)
+    if key not in shown or not np.array_equal(shown[key], value):
+        shown[key] = value
+        setattr(handle, attribute, value)
 
 
 def _color_name(color: tuple[int, int, int]) -> str:

@@ -29,6 +29,7 @@ from ..maglev import (
     decoupling_gain_v_per_m_s3,
     linearising_control,
 )
+from ..maglev_scene import Columns, DrawingScale, MaglevScene, exaggeration_for
 from ..maglev_simulation import (
     CONTROLLERS,
     FILTERS,
@@ -137,6 +138,11 @@ def setup(values: dict, reference_name: str | None = None) -> MaglevSetup:
         reference=reference(values, reference_name))
 
 
+def drawing_scale(values: dict) -> DrawingScale:
+    """How the 3D view draws the gap: the reference's amplitude at 1 mm or more (life size at 1 mm and up)."""
+    return DrawingScale(exaggeration_for(REFERENCES[values["reference"]]["amplitude_m"], 1e-3), GAP_M)
+
+
 def within_3_sigma_percent(trace: dict, error: str, sigma: str) -> float:
     after = trace["time_s"] > SETTLE_S
     if not np.any(after):
@@ -227,6 +233,13 @@ class MaglevTracking(Exercise):
 
     def simulation(self, values: dict) -> MaglevSimulation:
         return MaglevSimulation(setup(values), seed=int(values["seed"]))
+
+    def scene(self, values: dict) -> MaglevScene:
+        """The ball at its true gap, the estimate as its outline; life size, or the 0.05 mm
+        references magnified to about 1 mm."""
+        return MaglevScene(values, Columns(ball="x_true_m", ball_label="ball", current="current_true_a",
+                                           ghost="x_estimated_m", guarded="guarded",
+                                           velocity="velocity_true_m_per_s"), drawing_scale)
 
     def live_readouts(self, trace: dict[str, np.ndarray]) -> list[tuple[str, float, str]]:
         inside_x = np.mean(np.abs(trace["position_error_m"]) <= 3 * trace["x_sigma_m"]) * 100

@@ -28,6 +28,7 @@ import scipy.stats
 from .. import recordings
 from ..continuous_discrete_ekf import OBSERVER_COLUMNS, run_observer
 from ..maglev import TABLE_3_1
+from ..maglev_scene import DRAWN_GAP_MAX_M, Columns, DrawingScale, MaglevScene, exaggeration_for
 from ..maglev_simulation import preset_q
 from ..parameters import Parameter, ParameterError
 from . import Analysis, Chart, Exercise, Plot, Series
@@ -112,6 +113,15 @@ def sensor_noise_m(rec: recordings.Recording, values: dict) -> float:
                              f"holds {np.count_nonzero(still)} samples; choose a window with at least 10 "
                              f"inside the recording's 0 ... {rec.time_s[-1]:g} s")
     return float(np.std(rec.measured_m[still]))
+
+
+def drawing_scale(values: dict) -> DrawingScale:
+    """How the 3D view draws the gap: the recording's widest excursion from its median reference
+    magnified to fill the drawn range (a recording wanders by micrometres)."""
+    rec = recording(values)
+    centre = float(np.median(rec.reference_m))
+    room = min(centre, DRAWN_GAP_MAX_M - centre)
+    return DrawingScale(exaggeration_for(float(np.max(np.abs(rec.measured_m - centre))), room), centre)
 
 
 def observe(rec: recordings.Recording, values: dict) -> dict[str, np.ndarray]:
@@ -266,6 +276,13 @@ class MaglevTuning(Exercise):
 
     def simulation(self, values: dict) -> Replay:
         return Replay(observe(recording(values), values))
+
+    def scene(self, values: dict) -> MaglevScene:
+        """A recording has no true position: the ball is drawn at the filter's estimate, the
+        recorded measurement as a dot, the current is the estimated one."""
+        return MaglevScene(values, Columns(ball="x_estimated_m", ball_label="estimate",
+                                           current="current_estimated_a", current_label="coil x̂₃"),
+                           drawing_scale)
 
     def live_readouts(self, trace: dict[str, np.ndarray]) -> list[tuple[str, float, str]]:
         return [("Mean NIS", float(np.mean(trace["nis"])), "")]
