@@ -8,9 +8,8 @@ import time
 import viser
 
 from app.session import LabSession
+from lab_modules.bearing_scene import CAMERA_POSITION
 from lab_modules.exercises import get
-
-CAMERA_POSITION = (4.0, 4.0, 4.0)
 
 
 def serve(host: str = "127.0.0.1", port: int = 8080, exercise: str = "kalman_noise") -> None:
@@ -21,7 +20,7 @@ def serve(host: str = "127.0.0.1", port: int = 8080, exercise: str = "kalman_noi
     server = viser.ViserServer(host=host, port=port, label="AMB estimation lab", verbose=False)
     # The default view direction (the space diagonal), from farther away: the 3D view is the
     # narrow gap between the docked controls and charts, and the scenes must fit its width.
-    server.initial_camera.position = CAMERA_POSITION
+    server.initial_camera.position = tuple(CAMERA_POSITION)
     server.initial_camera.look_at = (0.0, 0.0, 0.0)
     sessions: dict[int, LabSession] = {}
     lock = threading.Lock()

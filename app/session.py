@@ -24,6 +24,7 @@ from lab_modules.parameters import Parameter, ParameterError
 
 STATIC = Path(__file__).resolve().parent.parent / "static"
 FRAME_S = 1 / 25                  # display refresh
+SCENE_FRAME_S = 1 / 10            # 3D view refresh: each change costs the browser a render
 SCOPE_WINDOW_S = 0.05             # simulated time shown on the scope (at the slowest time scale)
 SCOPE_POINTS = 500                # points sent per series per frame
 SCOPE_ROWS = 20_000               # most samples the scope keeps
@@ -68,6 +69,8 @@ class LabSession:
         self.analysis_request: tuple[int, Exercise, dict] | None = None
         self.analysis_wakeup = threading.Condition()
         client.gui.configure_theme(dark_mode=False, show_logo=False, control_width="large")
+        client.scene.configure_default_lights(cast_shadow=False)   # shadow passes made every scene update costly
+        client.scene.configure_environment_map(hdri=None)
         self._start(exercise)
         threading.Thread(target=self._analysis_worker, name=f"analysis-{client.client_id}", daemon=True).start()
 
@@ -303,7 +306,7 @@ class LabSession:
 
     # -- simulation thread -------------------------------------------------------------
     def _run(self, generation: int) -> None:
-        carry, last = 0.0, time.perf_counter()
+        carry, last, next_scene = 0.0, time.perf_counter(), 0.0
         T = self.simulation.sample_time_s
         while self._current(generation):
             time.sleep(FRAME_S)
@@ -311,8 +314,9 @@ class LabSession:
                 return
             now = time.perf_counter()
             elapsed, last = now - last, now
-            if self.scene is not None:
+            if self.scene is not None and now >= next_scene:
                 self.scene.animate(now, self._latest())
+                next_scene = now + SCENE_FRAME_S
             with self.lock:
                 if not self.running:
                     continue

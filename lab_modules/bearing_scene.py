@@ -18,12 +18,12 @@ markers of the measured and estimated positions are drawn displaced by
 ``exaggeration`` times their simulated value, stated in the view (the drawn
 rotor then overlaps the poles it approaches; the true gaps are in the text).
 
-Framing: viser's default camera (three.js position (3, 3, 3) looking at the
-origin, 75° vertical field of view) on a 1366 x 768 window: the canvas is
-the 606 px left of the docked 760 px panel, and the scene is visible only in
-the strip left of the floating control panel (about 200 px wide).  The bearing's face is turned parallel to the image
-plane and placed life size on the camera ray through that strip, as near
-to the camera as makes it about ``STATOR_DIAMETER_PX`` wide.
+Framing: the lab's camera (``CAMERA_POSITION``, set by the server, looking at
+the origin, 75° vertical field of view) on a 1366 x 768 window, where the 3D
+canvas is the gap between the docked controls and charts (``CANVAS_PX``).  The
+bearing's face is turned parallel to the image plane and placed life size on
+the camera ray through ``BEARING_CENTRE_PX``, as near to the camera as makes
+it about ``STATOR_DIAMETER_PX`` wide.
 """
 
 from __future__ import annotations
@@ -54,6 +54,7 @@ COIL_DEPTH_M = 0.030
 STATOR_RADIUS_M = BORE_RADIUS_M + POLE_LENGTH_M + YOKE_THICKNESS_M
 MAX_DRAWN_OFFSET_M = 0.07           # beyond this the drawn displacement is clamped ("off scale")
 LONGEST_ARROW_M = 0.12
+TEXT_INTERVAL_S = 0.5               # labels and legend refresh [s]: the browser re-lays out text
 NO_SHADOWS = {"cast_shadow": False, "receive_shadow": False}   # shadows cost frames, show nothing here
 
 #: Magnet centres, clockwise from the top of the view; the upper and lower
@@ -66,12 +67,14 @@ TRUE_BLUE = (31, 119, 180)          # the scope's colours: true, measured, estim
 MEASURED_GREY, ESTIMATE_RED = (120, 120, 120), (214, 39, 40)
 BEARING_FORCE_GREEN, DISTURBANCE_PURPLE = (44, 160, 44), (148, 103, 189)
 
-# The default camera in world coordinates (scene up +z), as the viewer shows it.
-CAMERA_POSITION = np.array([3.0, 3.0, 3.0])
+# The lab's camera in world coordinates (scene up +z), looking at the origin; the
+# server sets it (app/server.py), the views are framed for it.
+CAMERA_POSITION = np.array([4.0, 4.0, 4.0])
 CAMERA_FOV_RAD = np.deg2rad(75.0)
-CANVAS_PX = (1366 - 760, 768)      # the window less the right panel docked beside the canvas
-BEARING_CENTRE_PX = (102, 430)      # in the strip left of the control panel
-STATOR_DIAMETER_PX = 170
+CANVAS_PX = (1366 - 380 - 600, 768)  # 1366x768 less the docked controls and charts (app/session.py)
+BEARING_CENTRE_PX = (193, 300)
+STATOR_DIAMETER_PX = 300
+
 
 
 def view_pose(centre_px: tuple[float, float] = BEARING_CENTRE_PX,
@@ -154,6 +157,7 @@ class BearingScene:
         self.rotor_label = rotor_label
         self.handles: dict = {}
         self.shown: dict = {}                     # last values sent, to send only changes
+        self.next_text_s = 0.0                    # text is re-laid out by the browser: refresh it slowly
 
     def drawn_offset_m(self, x_m: float) -> float:
         """Drawn displacement [m, life size] of a simulated one, clamped to ``MAX_DRAWN_OFFSET_M``."""
@@ -234,10 +238,15 @@ class BearingScene:
             if np.isfinite(value):
                 self._set(frame, "position", (0.0, 0.0, self.drawn_offset_m(value)))
         i0 = RIG.i0_a
+        text_due = wall_time_s >= self.next_text_s
+        if text_due:
+            self.next_text_s = wall_time_s + TEXT_INTERVAL_S
         for magnet, current in (("upper", i0 + i), ("lower", i0 - i)):
             for k in (0, 1):
                 self._set(h["coils"][magnet, k], "color", coil_color(current))
-            self._set(h["currents"][magnet], "text", f"i₀{'+' if magnet == 'upper' else '−'}i = {current:.2f} A")
+            if text_due:
+                self._set(h["currents"][magnet], "text",
+                          f"i₀{'+' if magnet == 'upper' else '−'}i = {current:.2f} A")
         bearing_force = float(RIG.magnetic_force(x, i))
         self._arrow("bearing", bearing_force, -0.03, lift)
         cos_alpha = np.cos(RIG.pole_angle_rad)
@@ -252,7 +261,8 @@ class BearingScene:
             self._arrow("disturbance", disturbance, 0.03, lift)
             lines.append(f"↑ f_z = {disturbance:+.0f} N (violet)")
         lines += [f"arrows {self.force_scale_m_per_n * 1e3:g} mm/N", "coils: pale 0, copper i₀, red 2i₀"]
-        self._set(h["legend"], "text", "\n".join(lines))
+        if text_due:
+            self._set(h["legend"], "text", "\n".join(lines))
 
     # -- helpers ---------------------------------------------------------------------------
     def _set(self, handle, attribute: str, value) -> None:

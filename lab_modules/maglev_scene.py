@@ -30,9 +30,9 @@ controller guards (x1 -> 0, x3 -> 0; ``maglev.GUARD_GAP_M``,
 ``WARN_CURRENT_A``, or a guarded controller step, and dark red once the ball has
 struck the magnet or dropped out of reach (the simulation's touchdown limits).
 
-Framing as the bearing's (``bearing_scene.view_pose``): viser's default
-camera, the magnet's face centred on ``FACE_CENTRE_PX`` in the strip left of
-the floating control panel, ``PX_PER_MM`` pixels per millimetre.
+Framing as the bearing's (``bearing_scene.view_pose``): the lab's camera,
+the magnet's face centred on ``FACE_CENTRE_PX`` in the 3D canvas between the
+docked panels, ``PX_PER_MM`` pixels per millimetre.
 """
 
 from __future__ import annotations
@@ -79,7 +79,7 @@ BALL_STEEL = (135, 140, 150)             # darker than the bearing's steel: the 
 WARNING_AMBER = (245, 160, 0)
 STOPPED_RED = (110, 15, 15)              # darker than the estimate's red outline drawn over the ball
 GRAVITY_VIOLET = DISTURBANCE_PURPLE
-FACE_CENTRE_PX = (102, 330)
+FACE_CENTRE_PX = (193, 320)
 LEGEND_INTERVAL_S = 0.25
 PX_PER_MM = 3.0
 
