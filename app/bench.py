@@ -70,7 +70,7 @@ def filterpy_loop(sim, n_steps: int) -> np.ndarray:
     return estimates
 
 
-def _throughput(seconds: float, threads: int, repeats: int = 3) -> tuple[float, float]:
+def _throughput(seconds: float, threads: int, repeats: int = 5) -> tuple[float, float]:
     """Simulated seconds per wall second, summed over ``threads`` parallel
     simulations (best of ``repeats``), and the process's CPU time per wall
     time in that run (about ``threads`` when the loops really run in parallel)."""
