@@ -135,6 +135,9 @@ class LabSession:
             upload = gui.add_upload_button("Load recording (CSV)", icon=viser.Icon.UPLOAD, mime_type=".csv,text/csv",
                                            hint=self.exercise.data_description)
             upload.on_upload(lambda _event: self._on_upload(upload.value))
+        if self.exercise.download_label:
+            download = gui.add_button(self.exercise.download_label, icon=viser.Icon.DOWNLOAD)
+            download.on_click(lambda _event: self._on_download())
         self.inputs: dict[str, viser.GuiInputHandle] = {}
         groups: dict[str, list[Parameter]] = {}
         for parameter in self.exercise.parameters:
@@ -231,13 +234,22 @@ class LabSession:
         try:
             data = self.exercise.load_data(uploaded.name, uploaded.content)
         except ParameterError as error:
-            self.error.content = f"⚠️ {uploaded.name}: {error}"
+            named = str(error) if uploaded.name in str(error) else f"{uploaded.name}: {error}"
+            self.error.content = f"⚠️ {named}"
             return
         self.error.content = f"Loaded {uploaded.name}."
         with self.lock:
             self.values["data"] = data
             self._reset()
         self._request_analysis()
+
+    def _on_download(self) -> None:
+        try:
+            filename, content = self.exercise.download(dict(self.values))
+        except ParameterError as error:
+            self.error.content = f"⚠️ {error}"
+            return
+        self.client.send_file_download(filename, content, save_immediately=True)
 
     def _on_button(self, which: str) -> None:
         with self.lock:

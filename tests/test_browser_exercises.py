@@ -96,3 +96,27 @@ def test_a_stopped_simulation_says_why_and_recovers(open_tab):
     time.sleep(2.0)
     assert page.get_by_text("Stopped:").count() == 0
     assert not tab.errors, tab.errors
+
+
+def test_record_a_run_in_the_browser_and_load_it_into_the_tuning_exercise(open_tab, tmp_path):
+    """The maglev workflow of §3.5 in the browser: record a lead-lag run in the
+    tracking exercise (a CSV download), switch to the tuning exercise, upload it."""
+    tab = open_tab()
+    page = tab.page
+    page.get_by_role("heading", name=get("kalman_noise").title).wait_for(timeout=60000)
+    tab.switch_exercise(get("maglev_tracking").title)
+    page.get_by_role("button", name="Record a lead-lag run (CSV)").click()
+    page.get_by_text("no recording: with sensor_noise_mm = 1").wait_for(timeout=20000)   # 1 mm loses the ball
+    page.get_by_text("Plant", exact=True).click()                                         # open the folder
+    tab.set_number("log₁₀ Sensor noise σ [mm]", "-2")                                    # 0.01 mm
+    with page.expect_download(timeout=30000) as download:
+        page.get_by_role("button", name="Record a lead-lag run (CSV)").click()
+    path = tmp_path / download.value.suggested_filename
+    download.value.save_as(path)
+    assert "noise_0.01mm" in path.name
+    tab.switch_exercise(get("maglev_tuning").title)
+    with page.expect_file_chooser(timeout=10000) as chooser:
+        page.get_by_role("button", name="Load recording (CSV)").click()
+    chooser.value.set_files(path)
+    page.get_by_text(f"Loaded {path.name}.").wait_for(timeout=20000)
+    assert not tab.errors, tab.errors

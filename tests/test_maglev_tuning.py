@@ -165,3 +165,14 @@ def test_tracking_analysis_plots_and_guard_curve():
     assert step_plot.series[0][1][-1] == pytest.approx(2.0, rel=0.01)      # the loop settles on 2 mm
     voltages = voltage_plot.series[0][1]
     assert voltages[0] > 10 * voltages[np.argmin(np.abs(voltage_plot.x - 0.894))]
+
+
+def test_recording_downloaded_from_the_tracking_exercise_loads_into_the_tuning_exercise():
+    """The browser's "Record a lead-lag run" button hands the student a CSV that
+    ``maglev_tuning`` accepts, and eq. 3.3 recovers the chosen sensor noise."""
+    tracking, tuning = maglev_tracking.EXERCISE, maglev_tuning.EXERCISE
+    filename, content = tracking.download(tracking.resolve({"sensor_noise_mm": "0.01", "seed": "3"}))
+    assert filename.endswith(".csv") and "0.01" in filename
+    values = tuning.resolve({"data": tuning.load_data(filename, content)})
+    metrics = tuning.metrics(values, tuning.default_duration_s)
+    assert metrics["estimated_sensor_noise_mm"] == pytest.approx(0.01, rel=0.10)

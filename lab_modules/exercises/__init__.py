@@ -98,6 +98,7 @@ class Exercise:
     charts: tuple[Chart, ...]
     default_duration_s: float = 1.0
     data_description: str | None = None   # set: the exercise accepts an uploaded CSV
+    download_label: str | None = None     # set: a button offers ``download(values)`` as a file
 
     def resolve(self, overrides: dict | None = None) -> dict:
         overrides = dict(overrides or {})
@@ -129,6 +130,10 @@ class Exercise:
 
     def scene(self, values: dict) -> SceneView | None:
         return None
+
+    def download(self, values: dict) -> tuple[str, bytes]:
+        """A file for the student to keep: (file name, content)."""
+        raise ParameterError(f"exercise {self.name!r} offers no download")
 
     def load_data(self, filename: str, content: bytes):
         """Parse an uploaded file; raise ``ParameterError`` with one line naming the row or column."""

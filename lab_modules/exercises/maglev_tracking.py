@@ -37,8 +37,10 @@ from ..maglev_simulation import (
     MaglevSimulation,
     Reference,
     preset_q,
+    record_lead_lag_run,
 )
-from ..parameters import Parameter
+from ..parameters import Parameter, ParameterError
+from ..recordings import to_csv
 from . import Analysis, Chart, Exercise, Plot, Series
 
 T = TABLE_3_1.sample_time_s
@@ -163,6 +165,7 @@ class MaglevTracking(Exercise):
     worksheet = "maglev_tracking.md"
     parameters = PARAMETERS
     default_duration_s = 1.5
+    download_label = "Record a lead-lag run (CSV)"
     charts = (
         Chart("Gap x1", "mm", (
             Series("measured", "x_measured_m", 1e3, "#c0c0c0"),
@@ -278,6 +281,19 @@ class MaglevTracking(Exercise):
             "status": chosen_sim.status_message() or "ok",
             "duration_s": float(chosen["time_s"][-1] + T) if chosen["time_s"].size else 0.0,
         }
+
+    def download(self, values: dict) -> tuple[str, bytes]:
+        """A recording for ``maglev_tuning`` (§3.5): 1 s at rest on the positioning
+        tool, then 5 s held at 14.8 mm by the lead-lag controller, with this
+        exercise's sensor noise and seed (the shipped recording's settings otherwise)."""
+        noise_mm, seed = values["sensor_noise_mm"], int(values["seed"])
+        try:
+            run = record_lead_lag_run(duration_s=6.0, still_s=1.0, sensor_noise_m=noise_mm * 1e-3, seed=seed)
+        except RuntimeError as stopped:
+            raise ParameterError(f"no recording: with sensor_noise_mm = {noise_mm:g} the lead-lag loop lost "
+                                 f"the ball ({stopped}); record with less noise, e.g. the hardware's "
+                                 "0.0034 mm") from None
+        return f"maglev_leadlag_noise_{noise_mm:g}mm_seed_{seed}.csv", to_csv(run).encode("utf-8")
 
 
 EXERCISE = MaglevTracking()
