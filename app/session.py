@@ -24,7 +24,9 @@ from lab_modules.parameters import Parameter, ParameterError
 
 STATIC = Path(__file__).resolve().parent.parent / "static"
 FRAME_S = 1 / 25                  # display refresh
-SCENE_FRAME_S = 1 / 10            # 3D view refresh: each change costs the browser a render
+SCENE_FRAME_S = 1.0               # 3D view refresh: every scene change makes the viser client render
+                                  # continuously for 250 ms, so any faster rate renders non-stop (in software
+                                  # WebGL that starves the page: slider-to-readout latency 0.6 s instead of 0.1 s)
 SCOPE_WINDOW_S = 0.05             # simulated time shown on the scope (at the slowest time scale)
 SCOPE_POINTS = 500                # points sent per series per frame
 SCOPE_ROWS = 20_000               # most samples the scope keeps

@@ -54,7 +54,6 @@ COIL_DEPTH_M = 0.030
 STATOR_RADIUS_M = BORE_RADIUS_M + POLE_LENGTH_M + YOKE_THICKNESS_M
 MAX_DRAWN_OFFSET_M = 0.07           # beyond this the drawn displacement is clamped ("off scale")
 LONGEST_ARROW_M = 0.12
-TEXT_INTERVAL_S = 0.5               # labels and legend refresh [s]: the browser re-lays out text
 NO_SHADOWS = {"cast_shadow": False, "receive_shadow": False}   # shadows cost frames, show nothing here
 
 #: Magnet centres, clockwise from the top of the view; the upper and lower
@@ -157,7 +156,6 @@ class BearingScene:
         self.rotor_label = rotor_label
         self.handles: dict = {}
         self.shown: dict = {}                     # last values sent, to send only changes
-        self.next_text_s = 0.0                    # text is re-laid out by the browser: refresh it slowly
 
     def drawn_offset_m(self, x_m: float) -> float:
         """Drawn displacement [m, life size] of a simulated one, clamped to ``MAX_DRAWN_OFFSET_M``."""
@@ -238,15 +236,10 @@ class BearingScene:
             if np.isfinite(value):
                 self._set(frame, "position", (0.0, 0.0, self.drawn_offset_m(value)))
         i0 = RIG.i0_a
-        text_due = wall_time_s >= self.next_text_s
-        if text_due:
-            self.next_text_s = wall_time_s + TEXT_INTERVAL_S
         for magnet, current in (("upper", i0 + i), ("lower", i0 - i)):
             for k in (0, 1):
                 self._set(h["coils"][magnet, k], "color", coil_color(current))
-            if text_due:
-                self._set(h["currents"][magnet], "text",
-                          f"i₀{'+' if magnet == 'upper' else '−'}i = {current:.2f} A")
+            self._set(h["currents"][magnet], "text", f"i₀{'+' if magnet == 'upper' else '−'}i = {current:.2f} A")
         bearing_force = float(RIG.magnetic_force(x, i))
         self._arrow("bearing", bearing_force, -0.03, lift)
         cos_alpha = np.cos(RIG.pole_angle_rad)
@@ -261,8 +254,7 @@ class BearingScene:
             self._arrow("disturbance", disturbance, 0.03, lift)
             lines.append(f"↑ f_z = {disturbance:+.0f} N (violet)")
         lines += [f"arrows {self.force_scale_m_per_n * 1e3:g} mm/N", "coils: pale 0, copper i₀, red 2i₀"]
-        if text_due:
-            self._set(h["legend"], "text", "\n".join(lines))
+        self._set(h["legend"], "text", "\n".join(lines))
 
     # -- helpers ---------------------------------------------------------------------------
     def _set(self, handle, attribute: str, value) -> None:

@@ -61,8 +61,8 @@ def test_animate_moves_rotor_and_markers_by_the_stated_exaggeration():
     assert scene.nodes[f"{bs.ROOT}/ghost_0"].position == pytest.approx((0.0, 0.0, view.exaggeration * -3e-6))
     assert scene.nodes[f"{bs.ROOT}/ghost_1"].position == pytest.approx((0.0, 0.0, view.exaggeration * 1e-6))
     # a rotor beyond the drawing's range is clamped and says so
-    view.animate(1.0 + bs.TEXT_INTERVAL_S, {"time_s": 0.02, "x_true_m": 1e-3, "x_measured_m": 0.0, "x_estimated_m": 0.0,
-                        "current_a": 0.0})
+    view.animate(2.0, {"time_s": 0.02, "x_true_m": 1e-3, "x_measured_m": 0.0, "x_estimated_m": 0.0,
+                       "current_a": 0.0})
     assert scene.nodes[f"{bs.ROOT}/rotor"].position[2] == pytest.approx(bs.MAX_DRAWN_OFFSET_M)
     assert "off scale" in scene.nodes[f"{bs.ROOT}/labels/legend"].text
 
