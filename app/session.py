@@ -24,9 +24,10 @@ from lab_modules.parameters import Parameter, ParameterError
 
 STATIC = Path(__file__).resolve().parent.parent / "static"
 FRAME_S = 1 / 25                  # display refresh
-SCENE_FRAME_S = 1.0               # 3D view refresh: every scene change makes the viser client render
-                                  # continuously for 250 ms, so any faster rate renders non-stop (in software
-                                  # WebGL that starves the page: slider-to-readout latency 0.6 s instead of 0.1 s)
+#: 3D view refresh periods [s] (None: still).  Every scene change makes the viser client
+#: render for 250 ms, so anything faster than 4/s renders non-stop: fine on a GPU, but in
+#: software WebGL it starves the page (slider-to-readout latency 0.6 s instead of 0.15 s).
+SCENE_REFRESH = {"1 update/s": 1.0, "10 updates/s (needs a GPU)": 0.1, "still": None}
 SCOPE_WINDOW_S = 0.05             # simulated time shown on the scope (at the slowest time scale)
 SCOPE_POINTS = 500                # points sent per series per frame
 SCOPE_ROWS = 20_000               # most samples the scope keeps
@@ -67,6 +68,7 @@ class LabSession:
         self.generations = itertools.count()
         self.generation = next(self.generations)
         self.closed = False
+        self.scene_refresh = next(iter(SCENE_REFRESH))   # this tab's choice, kept across exercises
         self.thread: threading.Thread | None = None
         self.analysis_request: tuple[int, Exercise, dict] | None = None
         self.analysis_wakeup = threading.Condition()
@@ -133,6 +135,11 @@ class LabSession:
         self.status = gui.add_markdown("**Running**")
         buttons = gui.add_button_group("Simulation", ("Run", "Pause", "Reset"))
         buttons.on_click(lambda event: self._on_button(event.target.value))
+        if self.scene is not None:
+            refresh = gui.add_dropdown("3D view", tuple(SCENE_REFRESH), initial_value=self.scene_refresh,
+                                       hint="How often the 3D view follows the simulation. Smooth motion needs "
+                                            "a graphics card; without one it slows the whole page.")
+            refresh.on_update(lambda _event: setattr(self, "scene_refresh", refresh.value))
         if self.exercise.data_description:
             upload = gui.add_upload_button("Load recording (CSV)", icon=viser.Icon.UPLOAD, mime_type=".csv,text/csv",
                                            hint=self.exercise.data_description)
@@ -328,9 +335,10 @@ class LabSession:
                 return
             now = time.perf_counter()
             elapsed, last = now - last, now
-            if self.scene is not None and now >= next_scene:
+            period = SCENE_REFRESH[self.scene_refresh]
+            if self.scene is not None and period is not None and now >= next_scene:
                 self.scene.animate(now, self._latest())
-                next_scene = now + SCENE_FRAME_S
+                next_scene = now + period
             with self.lock:
                 if not self.running:
                     continue
