@@ -3,7 +3,7 @@
     python -m app [--host H] [--port P] [--exercise NAME]   start the browser lab (default)
     python -m app list [--json]                exercises and their parameters
     python -m app run NAME [--set N=V ...] [--duration S] [--seed N] [--data FILE] [--json]
-    python -m app bench [--json]               throughput benchmark
+    python -m app bench [--json] [--browser]   throughput benchmark; --browser: slider-to-readout latency
 
 Bad input (unknown exercise or parameter, non-numbers, NaN, out of range)
 exits with status 2 and one line naming the problem and the valid range.
@@ -15,6 +15,7 @@ import argparse
 import json
 import math
 import sys
+import tempfile
 from pathlib import Path
 
 from lab_modules.exercises import get, registry
@@ -45,6 +46,8 @@ def _parser() -> argparse.ArgumentParser:
     bench = sub.add_parser("bench", help="closed-loop throughput benchmark")
     bench.add_argument("--json", action="store_true", help="print JSON")
     bench.add_argument("--seconds", type=float, default=2.0, help="simulated seconds per measurement")
+    bench.add_argument("--browser", action="store_true",
+                       help="instead: slider-to-readout latency in headless Chromium (needs the test extras)")
     return parser
 
 
@@ -139,6 +142,10 @@ def main(argv: list[str] | None = None) -> int:
             return command_list(args.json)
         if args.command == "run":
             return command_run(args)
+        if args.command == "bench" and args.browser:
+            from app.browser_bench import main as browser_bench_main
+            with tempfile.TemporaryDirectory() as scratch:
+                return browser_bench_main(args.json, Path(scratch) / "server.log")
         if args.command == "bench":
             from app.bench import main as bench_main
             return bench_main(args.seconds, args.json)

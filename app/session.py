@@ -28,6 +28,7 @@ FRAME_S = 1 / 25                  # display refresh
 #: render for 250 ms, so anything faster than 4/s renders non-stop: fine on a GPU, but in
 #: software WebGL it starves the page (slider-to-readout latency 0.6 s instead of 0.15 s).
 SCENE_REFRESH = {"1 update/s": 1.0, "10 updates/s (needs a GPU)": 0.1, "still": None}
+SCENE_QUIET_AFTER_INPUT_S = 0.5   # the 3D view holds still this long after a control moves: readouts first
 SCOPE_WINDOW_S = 0.05             # simulated time shown on the scope (at the slowest time scale)
 SCOPE_POINTS = 500                # points sent per series per frame
 SCOPE_ROWS = 20_000               # most samples the scope keeps
@@ -69,6 +70,7 @@ class LabSession:
         self.generation = next(self.generations)
         self.closed = False
         self.scene_refresh = next(iter(SCENE_REFRESH))   # this tab's choice, kept across exercises
+        self.scene_quiet_until = 0.0                      # perf_counter time before which the 3D view waits
         self.thread: threading.Thread | None = None
         self.analysis_request: tuple[int, Exercise, dict] | None = None
         self.analysis_wakeup = threading.Condition()
@@ -226,6 +228,7 @@ class LabSession:
             self.error.content = f"⚠️ {error}"
             return
         self.error.content = ""
+        self.scene_quiet_until = time.perf_counter() + SCENE_QUIET_AFTER_INPUT_S
         with self.lock:
             self.values[parameter.name] = value
         if parameter.name == "time_scale":
@@ -336,7 +339,7 @@ class LabSession:
             now = time.perf_counter()
             elapsed, last = now - last, now
             period = SCENE_REFRESH[self.scene_refresh]
-            if self.scene is not None and period is not None and now >= next_scene:
+            if self.scene is not None and period is not None and now >= max(next_scene, self.scene_quiet_until):
                 self.scene.animate(now, self._latest())
                 next_scene = now + period
             with self.lock:

@@ -4,53 +4,22 @@
 from __future__ import annotations
 
 import os
-import socket
-import subprocess
-import sys
-import time
-import urllib.request
-from pathlib import Path
 
 import pytest
 
-CHROMIUM = "/usr/bin/chromium"
-FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
-         "--disable-component-update", "--disable-sync", "--no-first-run"]
-ROOT = Path(__file__).resolve().parent.parent
-VIEWPORT = {"width": 1366, "height": 768}      # the students' laptops
+from app.browser_bench import CHROMIUM, CHROMIUM_FLAGS, VIEWPORT
+from app.browser_bench import lab_server as serve_lab
 
 browser_only = [pytest.mark.browser,
                 pytest.mark.skipif(not os.path.exists(CHROMIUM), reason="Debian's chromium is not installed")]
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.fixture(scope="session")
 def lab_server(tmp_path_factory):
     """The lab served on a free port (new tabs open on kalman_noise); yields (url, server log path)."""
-    port = _free_port()
     log_path = tmp_path_factory.mktemp("lab-server") / "server.log"
-    log = log_path.open("w")
-    server = subprocess.Popen([sys.executable, "-m", "app", "--port", str(port)], cwd=ROOT,
-                              stdout=log, stderr=subprocess.STDOUT, text=True)
-    url = f"http://127.0.0.1:{port}"
-    deadline = time.time() + 120
-    while time.time() < deadline:
-        try:                                          # a real request: a bare connect makes the server log an error
-            urllib.request.urlopen(url, timeout=5).close()
-            break
-        except OSError:
-            if server.poll() is not None:
-                pytest.fail(f"server exited: {log_path.read_text()}")
-            time.sleep(0.3)
-    yield url, log_path
-    server.terminate()
-    server.wait(timeout=10)
-    log.close()
+    with serve_lab(log_path) as url:
+        yield url, log_path
 
 
 @pytest.fixture(scope="session")
@@ -62,7 +31,7 @@ def lab_url(lab_server) -> str:
 def browser():
     sync_api = pytest.importorskip("playwright.sync_api")
     with sync_api.sync_playwright() as p:
-        chromium = p.chromium.launch(executable_path=CHROMIUM, args=FLAGS)
+        chromium = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_FLAGS)
         yield chromium
         chromium.close()
 

@@ -1,0 +1,164 @@
+"""``python -m app bench --browser``: how fast a slider move shows in the readouts.
+
+Starts the lab on a free port, opens it in headless Chromium (Debian's, driven
+by Playwright) at 1366 x 768 and clicks the position-noise slider of
+``kalman_noise`` at a dozen places, once per 3D-view refresh setting.  The
+latency of one move is measured inside the page, as a student would see it:
+from the pointer event that moves the slider to the first animation frame
+after the readouts table changed (a ``MutationObserver``), so the time
+Playwright itself needs to send clicks and poll the page is not counted.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import socket
+import statistics
+import subprocess
+import sys
+import time
+import urllib.request
+from collections.abc import Iterator
+from pathlib import Path
+
+from app.session import SCENE_REFRESH
+
+ROOT = Path(__file__).resolve().parent.parent
+CHROMIUM = "/usr/bin/chromium"
+CHROMIUM_FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                  "--disable-component-update", "--disable-sync", "--no-first-run"]
+VIEWPORT = {"width": 1366, "height": 768}      # the students' laptops
+READOUT_MARK = "RMS displacement"              # text of kalman_noise's readouts table
+SLIDER_POSITIONS = (0.2, 0.35, 0.5, 0.25, 0.4, 0.3, 0.45, 0.15, 0.22, 0.38, 0.28, 0.33)  # of the track
+TARGET_MS = 100
+
+#: Installed in the page: ``window.readoutLatencies`` collects, per readouts change,
+#: [ms to the DOM change, ms to the next frame] since the last pointer or input event.
+LATENCY_PROBE = """mark => {
+  const probe = {since: null, samples: []};
+  window.readoutLatencies = probe.samples;
+  const start = e => { probe.since = e.timeStamp; };
+  document.addEventListener('pointerdown', start, true);
+  document.addEventListener('input', start, true);
+  const table = () => [...document.querySelectorAll('table')].find(t => t.innerText.includes(mark));
+  let shown = table() ? table().innerText : '';
+  new MutationObserver(() => {
+    const t = table();
+    if (!t || t.innerText === shown) return;
+    shown = t.innerText;
+    if (probe.since === null) return;
+    const since = probe.since, changed = performance.now();
+    probe.since = null;
+    requestAnimationFrame(() => probe.samples.push([changed - since, performance.now() - since]));
+  }).observe(document.body, {subtree: true, childList: true, characterData: true});
+}"""
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@contextlib.contextmanager
+def lab_server(log_path: Path, timeout_s: float = 120.0) -> Iterator[str]:
+    """The lab served by a child process on a free port; yields its URL."""
+    port = free_port()
+    with log_path.open("w") as log:
+        server = subprocess.Popen([sys.executable, "-m", "app", "--port", str(port)], cwd=ROOT,
+                                  stdout=log, stderr=subprocess.STDOUT, text=True)
+        url = f"http://127.0.0.1:{port}"
+        try:
+            deadline = time.time() + timeout_s
+            while True:
+                try:                                  # a real request: a bare connect makes the server log an error
+                    urllib.request.urlopen(url, timeout=5).close()
+                    break
+                except OSError:
+                    if server.poll() is not None or time.time() > deadline:
+                        raise RuntimeError(f"the lab server did not start: {log_path.read_text()}") from None
+                    time.sleep(0.3)
+            yield url
+        finally:
+            server.terminate()
+            server.wait(timeout=10)
+
+
+def install_probe(page) -> None:
+    page.evaluate(LATENCY_PROBE, READOUT_MARK)
+
+
+def probed_latencies_ms(page) -> list[list[float]]:
+    return page.evaluate("window.readoutLatencies")
+
+
+def wait_for_new_sample(page, count: int, timeout_s: float = 10.0) -> None:
+    deadline = time.perf_counter() + timeout_s
+    while len(probed_latencies_ms(page)) == count:
+        if time.perf_counter() > deadline:
+            raise RuntimeError("the readouts did not change after a slider move")
+        time.sleep(0.01)
+
+
+def slider_latencies_ms(page, pause_s: float = 1.2) -> list[float]:
+    """Click the first slider (the position-noise one) at ``SLIDER_POSITIONS``; ms to the shown readouts.
+
+    The pause between moves outlasts the 3D view's hold after an input
+    (``SCENE_QUIET_AFTER_INPUT_S``), so moves also land while it renders."""
+    install_probe(page)
+    track = page.locator(".mantine-Slider-track").first.bounding_box()
+    for fraction in SLIDER_POSITIONS:
+        count = len(probed_latencies_ms(page))
+        page.mouse.click(track["x"] + fraction * track["width"], track["y"] + track["height"] / 2)
+        wait_for_new_sample(page, count)
+        time.sleep(pause_s)
+    return [shown for _, shown in probed_latencies_ms(page)]
+
+
+def measure(browser, url: str, refresh: str) -> list[float]:
+    page = browser.new_page(viewport=VIEWPORT)
+    try:
+        page.goto(url)
+        page.get_by_text(READOUT_MARK).first.wait_for(timeout=60000)
+        page.get_by_label("3D view", exact=True).first.click()
+        page.get_by_role("option", name=refresh, exact=True).click()
+        time.sleep(3.0)                               # charts and scene settle
+        return slider_latencies_ms(page)
+    finally:
+        page.close()
+
+
+def run(log_path: Path) -> dict:
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        raise RuntimeError("the browser benchmark needs Playwright: pip install -e '.[test]'") from None
+    if not Path(CHROMIUM).exists():
+        raise RuntimeError(f"the browser benchmark needs Chromium at {CHROMIUM} (Debian package 'chromium')")
+    results = {}
+    with lab_server(log_path) as url, sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_FLAGS)
+        for refresh in SCENE_REFRESH:
+            samples = measure(browser, url, refresh)
+            results[refresh] = {"median_ms": statistics.median(samples), "samples_ms": samples}
+        browser.close()
+    return {"measure": "slider move to the first frame showing new readouts (kalman_noise), in-page",
+            "by_3d_view_refresh": results, "target_median_ms": TARGET_MS}
+
+
+def main(as_json: bool, log_path: Path) -> int:
+    try:
+        result = run(log_path)
+    except RuntimeError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 1
+    if as_json:
+        print(json.dumps(result, indent=2))
+    else:
+        print(result["measure"])
+        for refresh, figures in result["by_3d_view_refresh"].items():
+            samples = ", ".join(f"{t:.0f}" for t in figures["samples_ms"])
+            print(f"  3D view {refresh}: median {figures['median_ms']:.0f} ms ({samples})")
+        print(f"  target: median < {TARGET_MS} ms")
+    return 0
