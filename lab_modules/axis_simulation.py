@@ -112,6 +112,23 @@ class AxisSetup:
                          "noise_x_v": sigma[2] ** 2, "noise_i_v": sigma[3] ** 2}
         return analysis.noise_rms(self.loop(use_estimate, gain_factor), variances)
 
+    @cached_property
+    def displacement_floor_m(self) -> float:
+        """Lower bound [m] on the RMS rotor displacement under *any* causal controller.
+
+        Whatever the controller does with y_0 ... y_k, x_{k+1} = x_{k+1|k} + error,
+        and the error is orthogonal to everything known at step k, so
+        E[x_{k+1}^2] >= P_{k+1|k}[x, x]: the one-step prediction error of the
+        Kalman filter that knows the plant's true noise (eq. 2 with the true Q
+        and R), in steady state.  Without process noise and sensor lag it is
+        sigma_x sqrt(exp(2 a T) - 1) ~ sigma_x sqrt(2 a T), a = sqrt(k_x / m):
+        the price of the unstable pole (linear plant, eq. 3-4)."""
+        sigma = self.noise_sigma
+        Q = np.zeros((self.model.nstates, self.model.nstates))
+        Q[1, 1], Q[2, 2] = sigma[0] ** 2, sigma[1] ** 2
+        _, P = analysis.steady_state_kalman(self.model, Q, np.diag(sigma[2:] ** 2))
+        return float(np.sqrt(P[0, 0]))
+
     def inputs_at(self, t_s) -> tuple[np.ndarray, np.ndarray]:
         """Reference [m] and disturbance force [N] at times ``t_s`` [s]: square
         waves of period ``step_period_s`` (first half zero, second half on)."""

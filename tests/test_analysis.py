@@ -148,3 +148,20 @@ def test_pid_dc_and_high_frequency_limits(gain, ti, td, tau):
     assert abs(complex(discrete(np.exp(1j * w * T)))) == pytest.approx(gain / (ti * w), rel=0.02)
     assert complex(discrete(-1.0)).real == pytest.approx(gain * (1 + td / tau), rel=1e-9)
     assert abs(complex(discrete(-1.0)).imag) <= 1e-9 * gain * (1 + td / tau)
+
+
+def test_displacement_floor_is_the_unstable_poles_price():
+    """Without process noise and sensor lag the bound is sigma_x sqrt(exp(2aT) - 1)
+    for the unstable pole a = sqrt(k_x / m) (a scalar Riccati equation)."""
+    axis = kalman_noise_setup(process_force_n=0.0, process_current_a=0.0, sensor_lag_s=0.0)
+    a = np.sqrt(RIG.kx_n_per_m / RIG.equivalent_mass_kg)
+    expected = axis.sensor_noise_m * np.sqrt(np.exp(2 * a * T) - 1)
+    assert axis.displacement_floor_m == pytest.approx(expected, rel=1e-6)
+
+
+@pytest.mark.parametrize("use_estimate", [False, True])
+@pytest.mark.parametrize("gain_factor", [0.8, 1.0, 1.5])
+def test_no_loop_beats_the_displacement_floor(use_estimate, gain_factor):
+    """The bound holds for the PID on either feedback source (Lyapunov RMS >= bound)."""
+    axis = kalman_noise_setup(use_estimate=use_estimate)
+    assert axis.noise_rms(gain_factor=gain_factor)["x_m"] >= axis.displacement_floor_m

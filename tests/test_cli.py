@@ -169,13 +169,15 @@ def default_run():
 
 def test_default_run_reduces_noise_driven_motion(default_run):
     """Paper §II / Fig. 3: feeding back the estimate cuts the noise-driven rotor
-    oscillation by about 80 %.  The lab does not reach the paper's figure; the
-    test holds it to 40 %, the lab's honest floor, not to the paper's 80 %."""
+    oscillation by about 80 %.  For the true rotor no controller can: the lower
+    bound for any causal controller allows at most about 57 % against the PID on
+    the measurement.  The filter's estimate gets within 10 points of that."""
     assert default_run["status_measured_feedback"] == "ok"
     assert default_run["status_estimated_feedback"] == "ok"
-    assert default_run["oscillation_reduction_percent"] > 40.0
-    assert default_run["rms_displacement_estimated_feedback_um"] < default_run[
-        "rms_displacement_measured_feedback_um"]
+    assert default_run["max_possible_reduction_percent"] < 60.0
+    assert default_run["oscillation_reduction_percent"] > default_run["max_possible_reduction_percent"] - 10.0
+    assert default_run["rms_displacement_estimated_feedback_um"] > 0.95 * default_run[
+        "rms_displacement_lower_bound_um"]
 
 
 def test_default_run_reduces_what_the_rig_can_see_by_the_papers_80_percent(default_run):

@@ -172,10 +172,13 @@ class KalmanNoise(Exercise):
                  "closed loop": analysis.z_to_s(analysis.loop_poles(axis.loop()), T),
                  "filter error": analysis.z_to_s(np.linalg.eigvals(A - A @ K @ C), T)}
         reduction = 100.0 * (1.0 - rms["estimated"] / rms["measured"])
+        floor = axis.displacement_floor_m
         readouts = [
             ("RMS displacement, measured feedback", rms["measured"] * 1e6, "µm"),
             ("RMS displacement, estimated feedback", rms["estimated"] * 1e6, "µm"),
             ("Reduction by the filter", reduction, "%"),
+            ("RMS displacement, lower bound for any controller", floor * 1e6, "µm"),
+            ("Largest reduction any controller could reach", 100.0 * (1.0 - floor / rms["measured"]), "%"),
             ("RMS coil current, measured feedback", current["measured"], "A"),
             ("RMS coil current, estimated feedback", current["estimated"], "A"),
             ("Current-noise reduction", 100.0 * (1.0 - current["estimated"] / current["measured"]), "%"),
@@ -235,6 +238,7 @@ class KalmanNoise(Exercise):
             peak_current[source] = float(np.max(np.abs(trace[:, 1 + TRACE_COLUMNS.index("current_a")])))
             status[source] = sim.status_message() or "ok"
         predicted = {s: axis.noise_rms(s == "estimated")["x_m"] for s in ("measured", "estimated")}
+        floor = axis.displacement_floor_m
         limits = largest_gain_factors(axis, values)
         K, _ = axis.steady_state_filter
         A, C = np.asarray(axis.model.A), np.asarray(axis.model.C)
@@ -251,6 +255,8 @@ class KalmanNoise(Exercise):
             "current_noise_reduction_percent": 100.0 * (1.0 - current["estimated"] / current["measured"]),
             "predicted_rms_displacement_measured_feedback_um": predicted["measured"] * 1e6,
             "predicted_rms_displacement_estimated_feedback_um": predicted["estimated"] * 1e6,
+            "rms_displacement_lower_bound_um": floor * 1e6,
+            "max_possible_reduction_percent": 100.0 * (1.0 - floor / predicted["measured"]),
             "steady_state_kalman_gain": K.tolist(),
             "closed_loop_poles": pairs(loop_z),
             "closed_loop_poles_rad_per_s": pairs(analysis.z_to_s(loop_z, T)),
