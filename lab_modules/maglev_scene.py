@@ -333,6 +333,5 @@ class MaglevScene:
 
 
 def _upright(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """A ``tube`` (made along x) turned to stand along z (a cyclic axis swap), its faces turned
-    outwards: ``tube`` winds them inwards, which seen side-on shows the far inside of the coil."""
-    return np.ascontiguousarray(vertices[:, [1, 2, 0]]), np.ascontiguousarray(faces[:, ::-1])
+    """A ``tube`` (made along x) turned to stand along z: a cyclic axis swap, which keeps the winding."""
+    return np.ascontiguousarray(vertices[:, [1, 2, 0]]), faces

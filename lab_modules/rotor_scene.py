@@ -31,7 +31,8 @@ CAPACITIVE, EDDY_CURRENT, NODE = (40, 170, 80), (240, 140, 30), (220, 30, 30)
 
 
 def tube(length_m: float, inner_radius_m: float, outer_radius_m: float, segments: int = RING_SEGMENTS):
-    """Vertices and faces of a hollow cylinder (or a solid one with inner radius 0) along x, centred."""
+    """Vertices and faces of a hollow cylinder (or a solid one with inner radius 0) along x, centred;
+    faces wound counter-clockwise seen from outside (normals outwards, so back-face culling hides the far side)."""
     angle = np.linspace(0.0, 2 * np.pi, segments, endpoint=False)
     ring = np.stack([np.cos(angle), np.sin(angle)], axis=1)
     vertices = []
@@ -41,8 +42,8 @@ def tube(length_m: float, inner_radius_m: float, outer_radius_m: float, segments
     vertices = np.concatenate(vertices)
     outer_a, inner_a, outer_b, inner_b = (np.arange(segments) + k * segments for k in range(4))
     faces = []
-    for a, b, flip in ((outer_a, outer_b, False), (inner_a, inner_b, True), (outer_a, inner_a, True),
-                       (outer_b, inner_b, False)):
+    for a, b, flip in ((outer_a, outer_b, True), (inner_a, inner_b, False), (outer_a, inner_a, False),
+                       (outer_b, inner_b, True)):         # counter-clockwise seen from outside
         a1, b1 = np.roll(a, -1), np.roll(b, -1)
         quads = np.concatenate([np.stack([a, b, b1], 1), np.stack([a, b1, a1], 1)])
         faces.append(quads[:, ::-1] if flip else quads)
@@ -132,12 +133,15 @@ class RotorScene:
                        scene.add_box(f"{ROOT}/nodes/{k}/post", NODE, (0.004 * VIEW_SCALE, 0.004 * VIEW_SCALE,
                                                                         0.36 * VIEW_SCALE)))
                       for k in range(6)]
-        scene.add_label(f"{ROOT}/labels/bearing", "magnetic bearing",
+        # labels near the bearing end (the right edge of the narrow 3D view) extend to the left
+        scene.add_label(f"{ROOT}/labels/bearing", "magnetic bearing", anchor="bottom-right",
                         position=self._at(self._x(g.bearing_m), 0.0, g.stack_diameter_m / 2 + 0.08))
         scene.add_label(f"{ROOT}/labels/pivot", "ball bearing (pivot)",
                         position=self._at(self._x(g.pivot_m), 0.0, 0.06))
-        h["sensor_label"] = scene.add_label(f"{ROOT}/labels/sensor", "sensor", position=(0.0, 0.0, 0.0))
-        h["mode_label"] = scene.add_label(f"{ROOT}/labels/mode", "", position=self._at(self._x(0.3), 0.0, 0.25))
+        h["sensor_label"] = scene.add_label(f"{ROOT}/labels/sensor", "sensor", anchor="top-right",
+                                            position=(0.0, 0.0, 0.0))
+        h["mode_label"] = scene.add_label(f"{ROOT}/labels/mode", "", anchor="bottom-center",
+                                          position=self._at(self._x(g.length_m / 2), 0.0, 0.34))
         self.update(self.values)
 
     def update(self, values: dict) -> None:
@@ -159,7 +163,7 @@ class RotorScene:
             if ball.visible:
                 ball.position = post.position = self._at(self._x(self.nodes_m[k]), 0.0, 0.0)
         mode = int(values["shown_mode"])
-        h["mode_label"].text = f"mode {mode}: {self.frequency_hz:.0f} Hz (slowed, exaggerated; red: nodes)"
+        h["mode_label"].text = f"mode {mode}: {self.frequency_hz:.0f} Hz\n(slowed, exaggerated; red: nodes)"
 
     def animate(self, wall_time_s: float, latest: dict[str, float]) -> None:
         h = self.handles
