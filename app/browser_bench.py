@@ -2,7 +2,7 @@
 
 Starts the lab on a free port, opens it in headless Chromium (Debian's, driven
 by Playwright) at 1366 x 768 and clicks the position-noise slider of
-``kalman_noise`` at a dozen places, once per 3D-view refresh setting.  The
+``kalman_noise`` at twenty places, once per 3D-view refresh setting.  The
 latency of one move is measured inside the page, as a student would see it:
 from the pointer event that moves the slider to the first animation frame
 after the readouts table changed (a ``MutationObserver``), so the time
@@ -22,6 +22,8 @@ import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
+
 from app.session import SCENE_REFRESH
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -30,7 +32,8 @@ CHROMIUM_FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-background-network
                   "--disable-component-update", "--disable-sync", "--no-first-run"]
 VIEWPORT = {"width": 1366, "height": 768}      # the students' laptops
 READOUT_MARK = "RMS displacement"              # text of kalman_noise's readouts table
-SLIDER_POSITIONS = (0.2, 0.35, 0.5, 0.25, 0.4, 0.3, 0.45, 0.15, 0.22, 0.38, 0.28, 0.33)  # of the track
+#: Where the slider's track is clicked (fractions of its width): twenty places, alternately low and high
+SLIDER_POSITIONS = tuple(np.linspace(0.1, 0.5, 20).reshape(2, 10).T.ravel())
 TARGET_MS = 100
 
 #: Installed in the page: ``window.readoutLatencies`` collects, per readouts change,
