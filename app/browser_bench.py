@@ -1,4 +1,5 @@
-"""``python -m app bench --browser``: how fast a slider move shows in the readouts.
+"""``python -m app bench --browser``: how fast a slider move shows in the readouts,
+and how much of the server one open tab costs.
 
 Starts the lab on a free port, opens it in headless Chromium (Debian's, driven
 by Playwright) at 1366 x 768 and clicks the position-noise slider of
@@ -7,12 +8,19 @@ latency of one move is measured inside the page, as a student would see it:
 from the pointer event that moves the slider to the first animation frame
 after the readouts table changed (a ``MutationObserver``), so the time
 Playwright itself needs to send clicks and poll the page is not counted.
+
+Server load: with 1, 2 and 4 tabs open on the default exercise (3D view at
+its default refresh), the server process's CPU time per wall time (from
+``/proc``, Linux only) over ``LOAD_WINDOW_S``, divided by the number of tabs:
+the share of one core a student costs (the browser runs on the same machine
+here; on a classroom server it does not).
 """
 
 from __future__ import annotations
 
 import contextlib
 import json
+import os
 import socket
 import statistics
 import subprocess
@@ -20,6 +28,7 @@ import sys
 import time
 import urllib.request
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -35,6 +44,8 @@ READOUT_MARK = "RMS displacement"              # text of kalman_noise's readouts
 #: Where the slider's track is clicked (fractions of its width): twenty places, alternately low and high
 SLIDER_POSITIONS = tuple(np.linspace(0.1, 0.5, 20).reshape(2, 10).T.ravel())
 TARGET_MS = 100
+LOAD_TABS = (1, 2, 4)
+LOAD_WINDOW_S = 10.0
 
 #: Installed in the page: ``window.readoutLatencies`` collects, per readouts change,
 #: [ms to the DOM change, ms to the next frame] since the last pointer or input event.
@@ -64,9 +75,15 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+@dataclass(frozen=True)
+class LabServer:
+    url: str
+    pid: int
+
+
 @contextlib.contextmanager
-def lab_server(log_path: Path, timeout_s: float = 120.0) -> Iterator[str]:
-    """The lab served by a child process on a free port; yields its URL."""
+def lab_server(log_path: Path, timeout_s: float = 120.0) -> Iterator[LabServer]:
+    """The lab served by a child process on a free port; yields its URL and process id."""
     port = free_port()
     with log_path.open("w") as log:
         server = subprocess.Popen([sys.executable, "-m", "app", "--port", str(port)], cwd=ROOT,
@@ -82,7 +99,7 @@ def lab_server(log_path: Path, timeout_s: float = 120.0) -> Iterator[str]:
                     if server.poll() is not None or time.time() > deadline:
                         raise RuntimeError(f"the lab server did not start: {log_path.read_text()}") from None
                     time.sleep(0.3)
-            yield url
+            yield LabServer(url, server.pid)
         finally:
             server.terminate()
             server.wait(timeout=10)
@@ -132,6 +149,31 @@ def measure(browser, url: str, refresh: str) -> list[float]:
         page.close()
 
 
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time [s] of a process so far (Linux ``/proc``)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def server_load(browser, server: LabServer) -> dict[str, float]:
+    """Server cores per open tab, for ``LOAD_TABS`` tabs open at once."""
+    pages, load = [], {}
+    try:
+        for tabs in LOAD_TABS:
+            while len(pages) < tabs:
+                pages.append(browser.new_page(viewport=VIEWPORT))
+                pages[-1].goto(server.url)
+                pages[-1].get_by_text(READOUT_MARK).first.wait_for(timeout=60000)
+            time.sleep(3.0)                           # the new tabs' start-up is not steady state
+            cpu, start = cpu_seconds(server.pid), time.perf_counter()
+            time.sleep(LOAD_WINDOW_S)
+            load[str(tabs)] = (cpu_seconds(server.pid) - cpu) / (time.perf_counter() - start) / tabs
+    finally:
+        for page in pages:
+            page.close()
+    return load
+
+
 def run(log_path: Path) -> dict:
     try:
         from playwright.sync_api import sync_playwright
@@ -140,14 +182,16 @@ def run(log_path: Path) -> dict:
     if not Path(CHROMIUM).exists():
         raise RuntimeError(f"the browser benchmark needs Chromium at {CHROMIUM} (Debian package 'chromium')")
     results = {}
-    with lab_server(log_path) as url, sync_playwright() as p:
+    with lab_server(log_path) as server, sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_FLAGS)
         for refresh in SCENE_REFRESH:
-            samples = measure(browser, url, refresh)
+            samples = measure(browser, server.url, refresh)
             results[refresh] = {"median_ms": statistics.median(samples), "samples_ms": samples}
+        load = server_load(browser, server)
         browser.close()
     return {"measure": "slider move to the first frame showing new readouts (kalman_noise), in-page",
-            "by_3d_view_refresh": results, "target_median_ms": TARGET_MS}
+            "by_3d_view_refresh": results, "target_median_ms": TARGET_MS,
+            "server_cores_per_tab": load}
 
 
 def main(as_json: bool, log_path: Path) -> int:
@@ -164,4 +208,7 @@ def main(as_json: bool, log_path: Path) -> int:
             samples = ", ".join(f"{t:.0f}" for t in figures["samples_ms"])
             print(f"  3D view {refresh}: median {figures['median_ms']:.0f} ms ({samples})")
         print(f"  target: median < {TARGET_MS} ms")
+        print("server load, share of one core per open tab:")
+        for tabs, share in result["server_cores_per_tab"].items():
+            print(f"  {tabs} tab(s) open: {share:.3f} per tab (about {1 / share:.0f} tabs per core)")
     return 0

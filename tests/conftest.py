@@ -18,8 +18,8 @@ browser_only = [pytest.mark.browser,
 def lab_server(tmp_path_factory):
     """The lab served on a free port (new tabs open on kalman_noise); yields (url, server log path)."""
     log_path = tmp_path_factory.mktemp("lab-server") / "server.log"
-    with serve_lab(log_path) as url:
-        yield url, log_path
+    with serve_lab(log_path) as server:
+        yield server.url, log_path
 
 
 @pytest.fixture(scope="session")
