@@ -40,25 +40,26 @@ CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
                   "--disable-component-update", "--disable-sync", "--no-first-run"]
 VIEWPORT = {"width": 1366, "height": 768}      # the students' laptops
-READOUT_MARK = "RMS displacement"              # text of kalman_noise's readouts table
+READOUT_MARK = "RMS displacement, measured feedback"   # a kalman_noise readout that follows the noise slider
 #: Where the slider's track is clicked (fractions of its width): twenty places, alternately low and high
 SLIDER_POSITIONS = tuple(np.linspace(0.1, 0.5, 20).reshape(2, 10).T.ravel())
 TARGET_MS = 100
 LOAD_TABS = (1, 2, 4)
 LOAD_WINDOW_S = 10.0
 
-#: Installed in the page: ``window.readoutLatencies`` collects, per readouts change,
-#: [ms to the DOM change, ms to the next frame] since the last pointer or input event.
+#: Installed in the page: ``window.readoutLatencies`` collects, per change of the readout row
+#: ``mark`` (the scope-window rows below it change every second anyway), [ms to the DOM
+#: change, ms to the next frame] since the last pointer or input event.
 LATENCY_PROBE = """mark => {
   const probe = {since: null, samples: []};
   window.readoutLatencies = probe.samples;
   const start = e => { probe.since = e.timeStamp; };
   document.addEventListener('pointerdown', start, true);
   document.addEventListener('input', start, true);
-  const table = () => [...document.querySelectorAll('table')].find(t => t.innerText.includes(mark));
-  let shown = table() ? table().innerText : '';
+  const row = () => [...document.querySelectorAll('tr')].find(r => r.innerText.includes(mark));
+  let shown = row() ? row().innerText : '';
   new MutationObserver(() => {
-    const t = table();
+    const t = row();
     if (!t || t.innerText === shown) return;
     shown = t.innerText;
     if (probe.since === null) return;

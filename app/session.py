@@ -29,6 +29,7 @@ FRAME_S = 1 / 25                  # display refresh
 #: software WebGL it starves the page (slider-to-readout latency 0.6 s instead of 0.15 s).
 SCENE_REFRESH = {"1 update/s": 1.0, "10 updates/s (needs a GPU)": 0.1, "still": None}
 SCENE_QUIET_AFTER_INPUT_S = 0.5   # the 3D view holds still this long after a control moves: readouts first
+LIVE_READOUT_PERIOD_S = 1.0       # the readouts of the scope window follow the running simulation
 SCOPE_WINDOW_S = 0.05             # simulated time shown on the scope (at the slowest time scale)
 SCOPE_POINTS = 500                # points sent per series per frame
 SCOPE_ROWS = 20_000               # most samples the scope keeps
@@ -89,6 +90,7 @@ class LabSession:
             self.columns = {name: 1 + i for i, name in enumerate(simulation.columns)}
             self.buffer = np.empty((0, 1 + len(self.columns)))
         self.shown_poles: dict[str, np.ndarray] | None = None
+        self.shown_analysis: Analysis | None = None   # the last analysis shown, redrawn with fresh scope readouts
         self.scene = exercise.scene(self.values)
         self._build_gui()
         if self.scene is not None:
@@ -299,24 +301,16 @@ class LabSession:
                 traceback.print_exc()                         # analyses go on at the next slider move
                 with self.gui_lock:
                     if self._current(generation):
+                        self.shown_analysis = None        # the message stays until an analysis succeeds
                         self.readouts.content = f"⚠️ The analysis failed at these settings: {error}"
 
     def _show(self, generation: int, result: Analysis) -> bool:
         """Show an analysis; False if the tab no longer shows its exercise."""
-        lines = ["| quantity | value | unit |", "|---|---:|---|"]
-        lines += [f"| {label} | {_format(value)} | {unit} |" for label, value, unit in result.readouts]
-        with self.lock:
-            if generation != self.generation:
-                return False
-            trace = {name: self.buffer[:, column] for name, column in self.columns.items()}
-        if len(next(iter(trace.values()), ())) >= 10:
-            lines += [f"| {label} (scope window) | {_format(value)} | {unit} |"
-                      for label, value, unit in self.exercise.live_readouts(trace)]
-        readouts = "\n".join(lines) + "\n\n" + "\n\n".join(f"*{n}*" for n in result.notes)
         with self.gui_lock:
             if not self._current(generation):
                 return False
-            self.readouts.content = readouts
+            self.shown_analysis = result
+            self.readouts.content = self._readouts_markdown(result)
             self.client.flush()                       # the readouts go out now, not with the next window
             if not _same_poles(result.poles, self.shown_poles):
                 self.shown_poles = result.poles
@@ -328,9 +322,25 @@ class LabSession:
                 handle.data, handle.scales = data, options["scales"]
         return True
 
+    def _readouts_markdown(self, result: Analysis) -> str:
+        """The readouts table: the analysis's figures, then the exercise's figures of the scope window."""
+        lines = ["| quantity | value | unit |", "|---|---:|---|"]
+        lines += [f"| {label} | {_format(value)} | {unit} |" for label, value, unit in result.readouts]
+        with self.lock:
+            trace = {name: self.buffer[:, column] for name, column in self.columns.items()}
+        if len(next(iter(trace.values()), ())) >= 10:
+            lines += [f"| {label} (scope window) | {_format(value)} | {unit} |"
+                      for label, value, unit in self.exercise.live_readouts(trace)]
+        return "\n".join(lines) + "\n\n" + "\n\n".join(f"*{n}*" for n in result.notes)
+
+    def _refresh_live_readouts(self) -> None:
+        """Redraw the readouts with the scope window's current figures (call holding ``gui_lock``)."""
+        if self.shown_analysis is not None:
+            self.readouts.content = self._readouts_markdown(self.shown_analysis)
+
     # -- simulation thread -------------------------------------------------------------
     def _run(self, generation: int) -> None:
-        carry, last, next_scene = 0.0, time.perf_counter(), 0.0
+        carry, last, next_scene, next_readouts = 0.0, time.perf_counter(), 0.0, 0.0
         T = self.simulation.sample_time_s
         while self._current(generation):
             time.sleep(FRAME_S)
@@ -359,6 +369,9 @@ class LabSession:
                 if not self._current(generation):
                     return
                 self._draw()
+                if now >= next_readouts:
+                    self._refresh_live_readouts()
+                    next_readouts = now + LIVE_READOUT_PERIOD_S
                 if message and self.simulation is stopped and not self.running:   # not reset meanwhile
                     self.status.content = f"**Stopped: {message}** Press Run or Reset to start again."
                     self.client.add_notification("Simulation stopped", message, color="red",

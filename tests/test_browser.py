@@ -14,7 +14,8 @@ DEFAULT_NOISE = "1.3323"
 
 
 def _readouts(page) -> str:
-    return page.locator("table").filter(has_text="RMS displacement").first.inner_text()
+    """The readout row that follows the noise (the scope-window rows change every second anyway)."""
+    return page.locator("tr").filter(has_text="RMS displacement, measured feedback").first.inner_text()
 
 
 def _set_noise(page, index: int, value: str) -> None:
@@ -53,6 +54,11 @@ def test_lab_in_two_tabs(open_tab):
     assert DEFAULT_NOISE in second.visible_input_values(), \
         "a new tab must start from the defaults, not another tab's settings"
     assert _readouts(second.page) != _readouts(first.page)
+    window_row = second.page.locator("tr").filter(has_text="RMS displacement, this run (scope window)").first
+    window_row.wait_for(timeout=10000)
+    before = window_row.inner_text()
+    time.sleep(2.5)
+    assert window_row.inner_text() != before, "the scope-window readouts must follow the running simulation"
     print(f"slider move to readouts shown: median {statistics.median(latencies):.0f} ms "
           f"(of {', '.join(f'{t:.0f}' for t in latencies)} ms)")
     assert not first.errors + second.errors, first.errors + second.errors

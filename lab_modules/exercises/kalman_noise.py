@@ -197,9 +197,14 @@ class KalmanNoise(Exercise):
     def live_readouts(self, trace: dict[str, np.ndarray]) -> list[tuple[str, float, str]]:
         def rms(column):
             return float(np.sqrt(np.mean(trace[column] ** 2)))
+        error, sigma = trace["x_estimated_m"] - trace["x_true_m"], trace["x_sigma_m"]
+        normalised = error / np.maximum(sigma, 1e-300)
         return [("RMS displacement, this run", rms("x_true_m") * 1e6, "µm"),
                 ("RMS measured position, this run", rms("x_measured_m") * 1e6, "µm"),
-                ("RMS estimated position, this run", rms("x_estimated_m") * 1e6, "µm")]
+                ("RMS estimated position, this run", rms("x_estimated_m") * 1e6, "µm"),
+                # filter consistency: about 99.7 % and 1 when P is honest (Task 5)
+                ("Estimate error inside ±3σ", 100.0 * float(np.mean(np.abs(normalised) <= 3.0)), "%"),
+                ("Mean (error/σ)² of x, 1 = consistent", float(np.mean(normalised**2)), "")]
 
     def retune(self, simulation: AxisSimulation, values: dict) -> AxisSimulation:
         """A slider move changes the running experiment instead of restarting it."""
