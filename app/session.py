@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import viser
 
+from lab_modules.bearing_scene import CANVAS_PX
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, registry
 from lab_modules.parameters import Parameter, ParameterError
 
@@ -71,6 +72,7 @@ class LabSession:
         self.generation = next(self.generations)
         self.closed = False
         self.scene_refresh = next(iter(SCENE_REFRESH))   # this tab's choice, kept across exercises
+        self.worksheet_beside = False                     # likewise
         self.scene_quiet_until = 0.0                      # perf_counter time before which the 3D view waits
         self.thread: threading.Thread | None = None
         self.analysis_request: tuple[int, Exercise, dict] | None = None
@@ -144,6 +146,8 @@ class LabSession:
                                        hint="How often the 3D view follows the simulation. Smooth motion needs "
                                             "a graphics card; without one it slows the whole page.")
             refresh.on_update(lambda _event: setattr(self, "scene_refresh", refresh.value))
+        toggle = gui.add_checkbox("Worksheet beside the charts", self.worksheet_beside,
+                                  hint="Show the worksheet in place of the 3D view, next to the scope.")
         if self.exercise.data_description:
             upload = gui.add_upload_button("Load recording (CSV)", icon=viser.Icon.UPLOAD, mime_type=".csv,text/csv",
                                            hint=self.exercise.data_description)
@@ -181,12 +185,22 @@ class LabSession:
                     self.plots.append(gui.add_uplot(data, **options, aspect=2.0))
         else:
             self.plots = []
+        worksheet = (STATIC / "worksheets" / self.exercise.worksheet).read_text(encoding="utf-8")
         with panel.add_tab("Worksheet", viser.Icon.NOTEBOOK):
-            gui.add_markdown((STATIC / "worksheets" / self.exercise.worksheet).read_text(encoding="utf-8"))
+            gui.add_markdown(worksheet)
         gui.main_panel.dock_left()                    # both panels docked, the 3D view in between
         gui.main_panel.set_width(CONTROL_WIDTH_PX)
         panel.dock_right()
         panel.set_width(PANEL_WIDTH_PX)
+        # The worksheet can also take the 3D view's place, beside the charts (self-paced work).
+        beside = gui.add_panel(visible=self.worksheet_beside)
+        with beside.add_tab("Worksheet", viser.Icon.NOTEBOOK):
+            gui.add_markdown(worksheet)
+        beside.float(x=0, y=0, width=CANVAS_PX[0], height=CANVAS_PX[1])   # over the 3D view, docks untouched
+
+        def show_beside(_event) -> None:
+            self.worksheet_beside = beside.visible = toggle.value
+        toggle.on_update(show_beside)
 
     def _add_input(self, parameter: Parameter):
         gui, value = self.client.gui, self.values[parameter.name]

@@ -61,7 +61,7 @@ class Tab:
         """Choose ``title`` in the Exercise dropdown and wait for its heading."""
         self.page.get_by_label("Exercise", exact=True).first.click()
         self.page.get_by_role("option", name=title, exact=True).click()
-        self.page.get_by_role("heading", name=title).wait_for(timeout=30000)
+        self.page.get_by_role("heading", name=title, exact=True).wait_for(timeout=30000)
 
     def open_panel_tab(self, name: str) -> None:
         self.page.get_by_role("tab", name=name).click()

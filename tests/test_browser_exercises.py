@@ -120,3 +120,30 @@ def test_record_a_run_in_the_browser_and_load_it_into_the_tuning_exercise(open_t
     chooser.value.set_files(path)
     page.get_by_text(f"Loaded {path.name}.").wait_for(timeout=20000)
     assert not tab.errors, tab.errors
+
+
+def _visible_learning_goals(page) -> int:
+    return page.get_by_role("heading", name="Learning goals").evaluate_all(
+        "els => els.filter(e => e.offsetParent !== null && e.getBoundingClientRect().width > 0).length")
+
+
+def test_worksheet_beside_the_charts(open_tab):
+    """Self-paced work: the worksheet takes the 3D view's place while the Scope stays open,
+    follows an exercise switch, and goes away again."""
+    tab = open_tab()
+    page = tab.page
+    page.get_by_text("RMS displacement, measured feedback").first.wait_for(timeout=60000)
+    tab.open_panel_tab("Scope")
+    assert _visible_learning_goals(page) == 0
+    page.get_by_text("Worksheet beside the charts").first.click()
+    page.wait_for_function("() => [...document.querySelectorAll('h3, h2, h4')].some("
+                           "e => e.innerText === 'Learning goals' && e.offsetParent !== null)", timeout=10000)
+    assert page.locator(".uplot").first.is_visible(), "the scope must stay in view"
+    tab.switch_exercise(get("lqg_vs_pid").title)
+    page.get_by_text("Worksheet: the LQG regulator", exact=False).first.wait_for(state="visible", timeout=20000)
+    page.get_by_text("Worksheet beside the charts").first.click()
+    deadline = time.time() + 10
+    while _visible_learning_goals(page) and time.time() < deadline:
+        time.sleep(0.2)
+    assert _visible_learning_goals(page) == 0
+    assert not tab.errors, tab.errors
