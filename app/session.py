@@ -40,6 +40,8 @@ PANEL_WIDTH_PX = 600              # the docked charts (right); of 1366 px, 386 s
                                   # notifications (which open there and would otherwise cover the panel's tabs)
 SCOPE_ASPECT = 2.2                # width / height of a scope chart
 SETTLE_BEFORE_REMOVAL_S = 0.3     # an exercise switch waits this long between the last chart update and removal
+LOG_SCALE = {"distr": 3, "log": 10}   # uPlot's logarithmic scale
+LOG_DECADES = 4                   # a logarithmic plot shows at most this many decades
 LIGHT_DAMPING = 0.3               # poles below this damping always belong to the dominant view
 
 
@@ -430,7 +432,8 @@ def _plot_chart(plot: Plot) -> tuple[tuple, dict]:
     return (x, *ys), {
         "series": series, "title": plot.title,
         "axes": (viser.uplot.Axis(label=plot.x_label), viser.uplot.Axis(label=plot.y_label)),
-        "scales": {"x": viser.uplot.Scale(time=False), "y": viser.uplot.Scale(auto=False, **_span(*ys))}}
+        "scales": {"x": viser.uplot.Scale(time=False, **(LOG_SCALE if plot.log_x else {})),
+                   "y": viser.uplot.Scale(auto=False, **(LOG_SCALE | _log_span(*ys) if plot.log_y else _span(*ys)))}}
 
 
 def dominant_decay_rad_s(poles: dict[str, np.ndarray]) -> float:
@@ -497,6 +500,16 @@ def _pole_table(poles: dict[str, np.ndarray]) -> str:
             zeta = -pole.real / abs(pole) if abs(pole) > 0 else 1.0
             rows.append(f"| {name} | {pole.real:.0f} | {pole.imag:.0f} | {zeta:.2f} |")
     return "\n".join(rows)
+
+
+def _log_span(*arrays: np.ndarray) -> dict[str, float]:
+    """A logarithmic plot range over the positive finite values of ``arrays`` in whole decades,
+    at most ``LOG_DECADES`` of them below the largest value."""
+    positive = np.concatenate([a[np.isfinite(a) & (a > 0)] for a in arrays]) if arrays else np.zeros(0)
+    if positive.size == 0:
+        return {"min": 0.1, "max": 1.0}
+    top = np.ceil(np.log10(positive.max()))
+    return {"min": 10.0 ** max(np.floor(np.log10(positive.min())), top - LOG_DECADES), "max": 10.0**top}
 
 
 def _span(*arrays: np.ndarray) -> dict[str, float]:

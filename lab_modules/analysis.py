@@ -143,6 +143,25 @@ def noise_rms(loop: Loop, input_variances: dict[str, float]) -> dict[str, float]
     return dict(zip(LOOP_OUTPUTS, np.sqrt(np.maximum(np.diag(covariance), 0.0))))
 
 
+def noise_spectrum(loop: Loop, input_variances: dict[str, float], frequencies_hz,
+                   output: str = "x_m") -> np.ndarray:
+    """One-sided amplitude spectral density of one loop output [unit/sqrt(Hz)]
+    driven by white noise inputs (per-sample variances, as in ``noise_rms``).
+
+    A discrete white sequence of variance sigma^2 at sampling time T has the
+    one-sided density 2 sigma^2 T up to the Nyquist frequency, so
+    S_y(f) = sum_j |G_j(exp(j 2 pi f T))|^2 2 sigma_j^2 T; its integral over
+    0 ... 1/(2T) is the variance that ``noise_rms`` returns.  The frequency
+    responses come from python-control."""
+    sys, T = loop.system, loop.system.dt
+    omega = 2 * np.pi * np.asarray(frequencies_hz, dtype=float)
+    columns = [LOOP_INPUTS.index(name) for name in input_variances]
+    channels = sys[[LOOP_OUTPUTS.index(output)], columns]
+    response = np.asarray(control.frequency_response(channels, omega, squeeze=False).complex)[0]   # (inputs, f)
+    variances = np.array(list(input_variances.values()))
+    return np.sqrt(np.sum(np.abs(response) ** 2 * (2.0 * T * variances)[:, None], axis=0))
+
+
 def largest_gain_factor(rms_at_gain, bound: float, low: float = 0.05,
                         high: float = 10.0, tolerance: float = 1e-3) -> float:
     """Largest gain factor g in [low, high] with ``rms_at_gain(g) <= bound``.

@@ -45,6 +45,8 @@ class Plot:
     x: np.ndarray
     series: tuple[tuple[str, np.ndarray, str], ...]
     points: bool = False                              # markers only (scatter)
+    log_x: bool = False                               # logarithmic axes (positive values only)
+    log_y: bool = False
 
 
 @dataclass

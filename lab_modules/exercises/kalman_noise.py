@@ -27,7 +27,7 @@ from ..axis_simulation import AxisSetup, AxisSimulation
 from ..bearing_scene import ESTIMATE_RED, MEASURED_GREY, BearingScene, Ghost
 from ..closed_loop import TRACE_COLUMNS
 from ..parameters import Parameter
-from . import Analysis, Chart, Exercise, Series
+from . import Analysis, Chart, Exercise, Plot, Series
 from ._common import pid_from_values
 
 T = RIG.sample_time_s
@@ -96,6 +96,7 @@ PARAMETERS = (
       log=True, group="Run"),
 )
 
+SPECTRUM_POINTS = 200            # log-spaced frequencies of the motion spectrum, 1 Hz to Nyquist
 GAIN_CRITERION = ("largest common gain factor at which the noise-driven RMS rotor displacement "
                   "stays at or below the position sensor's noise sigma (unstable loops exceed it)")
 
@@ -128,6 +129,24 @@ def largest_gain_factors(axis: AxisSetup, values: dict) -> dict[str, float]:
                 lambda g, est=(source == "estimated"): axis.noise_rms(est, g)["x_m"], bound,
                 low=0.25, high=10.0, tolerance=2e-3) * values["gain_factor"]
             for source in ("measured", "estimated")}
+
+
+def motion_spectrum(axis: AxisSetup) -> Plot:
+    """Where the rotor moves: the amplitude spectral density of its noise-driven
+    displacement with measured and with estimated feedback, against the sensor
+    noise itself (the curves' squared areas are the RMS readouts' squares)."""
+    frequencies_hz = np.logspace(0.0, np.log10(0.999 / (2 * T)), SPECTRUM_POINTS)
+    sigma = axis.noise_sigma
+    variances = {"process_v": sigma[0] ** 2, "process_i": sigma[1] ** 2,
+                 "noise_x_v": sigma[2] ** 2, "noise_i_v": sigma[3] ** 2}
+    rotor = {source: analysis.noise_spectrum(axis.loop(source == "estimated"), variances, frequencies_hz) * 1e9
+             for source in ("measured", "estimated")}
+    sensor = np.full(frequencies_hz.size, axis.sensor_noise_m * np.sqrt(2 * T) * 1e9)
+    return Plot("Noise-driven rotor motion by frequency", "frequency [Hz]", "amplitude density [nm/√Hz]",
+                frequencies_hz, (("position sensor noise", sensor, "#b0b0b0"),
+                                 ("rotor, measured feedback", rotor["measured"], "#1f77b4"),
+                                 ("rotor, estimated feedback", rotor["estimated"], "#d62728")),
+                log_x=True, log_y=True)
 
 
 def pairs(values) -> list[list[float]]:
@@ -186,13 +205,14 @@ class KalmanNoise(Exercise):
             ("Kalman gain K_v (v ← position)", K[1, 0] * 1e3, "mm/s/V"),
         ]
         notes = [f"Gain criterion: {GAIN_CRITERION}."]
-        yield Analysis(readouts + [("Largest gain factors", float("nan"), "computing …")], poles, notes)
+        plots = [motion_spectrum(axis)]
+        yield Analysis(readouts + [("Largest gain factors", float("nan"), "computing …")], poles, notes, plots)
         limits = largest_gain_factors(axis, values)
         yield Analysis(readouts + [
             ("Largest gain factor, measured", limits["measured"], "×"),
             ("Largest gain factor, estimated", limits["estimated"], "×"),
             ("Ratio estimated / measured", limits["estimated"] / max(limits["measured"], 1e-9), "×"),
-        ], poles, notes)
+        ], poles, notes, plots)
 
     def live_readouts(self, trace: dict[str, np.ndarray]) -> list[tuple[str, float, str]]:
         def rms(column):
