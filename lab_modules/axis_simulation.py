@@ -105,12 +105,14 @@ class AxisSetup:
                                     self.steady_state_filter[0], use_estimate,
                                     None if state_gain is None else gain_factor * state_gain)
 
+    @property
+    def noise_variances(self) -> dict[str, float]:
+        """Per-sample variances of the loop's noise inputs (``analysis.LOOP_INPUTS``)."""
+        return dict(zip(("process_v", "process_i", "noise_x_v", "noise_i_v"), self.noise_sigma**2))
+
     def noise_rms(self, use_estimate: bool | None = None, gain_factor: float = 1.0) -> dict:
         """Steady-state RMS of x [m], i_ref [V] and i [A] driven by the plant's and sensors' noise."""
-        sigma = self.noise_sigma
-        variances = {"process_v": sigma[0] ** 2, "process_i": sigma[1] ** 2,
-                         "noise_x_v": sigma[2] ** 2, "noise_i_v": sigma[3] ** 2}
-        return analysis.noise_rms(self.loop(use_estimate, gain_factor), variances)
+        return analysis.noise_rms(self.loop(use_estimate, gain_factor), self.noise_variances)
 
     @cached_property
     def displacement_floor_m(self) -> float:

@@ -171,8 +171,7 @@ def test_no_loop_beats_the_displacement_floor(use_estimate, gain_factor):
 def test_noise_spectrum_integrates_to_the_lyapunov_variance(use_estimate):
     """Parseval: the one-sided density of x over 0 ... Nyquist has the area noise_rms(x)^2."""
     axis = kalman_noise_setup(use_estimate=use_estimate)
-    sigma = axis.noise_sigma
-    variances = dict(zip(("process_v", "process_i", "noise_x_v", "noise_i_v"), sigma**2))
+    variances = axis.noise_variances
     loop = axis.loop()
     frequencies_hz = np.linspace(0.0, 0.4999 / T, 20001)
     density = analysis.noise_spectrum(loop, variances, frequencies_hz) ** 2

@@ -136,10 +136,8 @@ def motion_spectrum(axis: AxisSetup) -> Plot:
     displacement with measured and with estimated feedback, against the sensor
     noise itself (the curves' squared areas are the RMS readouts' squares)."""
     frequencies_hz = np.logspace(0.0, np.log10(0.999 / (2 * T)), SPECTRUM_POINTS)
-    sigma = axis.noise_sigma
-    variances = {"process_v": sigma[0] ** 2, "process_i": sigma[1] ** 2,
-                 "noise_x_v": sigma[2] ** 2, "noise_i_v": sigma[3] ** 2}
-    rotor = {source: analysis.noise_spectrum(axis.loop(source == "estimated"), variances, frequencies_hz) * 1e9
+    rotor = {source: analysis.noise_spectrum(axis.loop(source == "estimated"), axis.noise_variances,
+                                             frequencies_hz) * 1e9
              for source in ("measured", "estimated")}
     sensor = np.full(frequencies_hz.size, axis.sensor_noise_m * np.sqrt(2 * T) * 1e9)
     return Plot("Noise-driven rotor motion by frequency", "frequency [Hz]", "amplitude density [nm/√Hz]",
