@@ -352,7 +352,9 @@ class LabSession:
     def _refresh_live_readouts(self) -> None:
         """Redraw the readouts with the scope window's current figures (call holding ``gui_lock``)."""
         if self.shown_analysis is not None:
-            self.readouts.content = self._readouts_markdown(self.shown_analysis)
+            readouts = self._readouts_markdown(self.shown_analysis)
+            if readouts != self.readouts.content:     # exercises without scope readouts send nothing
+                self.readouts.content = readouts
 
     # -- simulation thread -------------------------------------------------------------
     def _run(self, generation: int) -> None:
