@@ -6,7 +6,7 @@ by Playwright) at 1366 x 768 and clicks the position-noise slider of
 ``kalman_noise`` at twenty places, once per 3D-view refresh setting.  The
 latency of one move is measured inside the page, as a student would see it:
 from the pointer event that moves the slider to the first animation frame
-after the readouts table changed (a ``MutationObserver``), so the time
+after the readout row changed (a ``MutationObserver``), so the time
 Playwright itself needs to send clicks and poll the page is not counted.
 
 Server load: with 1, 2 and 4 tabs open on the default exercise (3D view at
