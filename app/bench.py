@@ -22,8 +22,8 @@ import time
 import numpy as np
 from filterpy.kalman import KalmanFilter as FilterpyKalman
 
-from lab_modules import closed_loop
 from lab_modules.exercises import get, registry
+from lab_modules.loops import radial_axis_loop
 
 
 def _simulation(use_estimate: bool = True, seed: int = 0):
@@ -33,7 +33,7 @@ def _simulation(use_estimate: bool = True, seed: int = 0):
 
 
 def filterpy_loop(sim, n_steps: int) -> np.ndarray:
-    """The loop of ``closed_loop.run`` in plain Python with filterpy's filter.
+    """The loop of ``radial_axis_loop.run`` in plain Python with filterpy's filter.
 
     Uses a fresh ``sim``'s set-up and initial state and draws the same noise; returns
     the corrected position estimates [m]."""
@@ -62,7 +62,7 @@ def filterpy_loop(sim, n_steps: int) -> np.ndarray:
         ctrl = Ac @ ctrl + Bc[:, 0] * e
         kf.predict(u=np.array([[u]]))
         if setup.nonlinear:
-            closed_loop._rk4_step(plant, u, disturbance[k], physics, T, *scratch)
+            radial_axis_loop._rk4_step(plant, u, disturbance[k], physics, T, *scratch)
         else:
             plant = A4 @ plant + Bu4 * u + Bf4 * disturbance[k]
         if setup.sensor_lag_s <= 0:
@@ -104,7 +104,7 @@ def run(seconds: float = 2.0) -> dict:
     start = time.perf_counter()
     reference = filterpy_loop(reference_sim, n_ref)
     filterpy_speed = n_ref * reference_sim.setup.rig.sample_time_s / (time.perf_counter() - start)
-    compiled = compiled_sim.advance(n_ref)[:, 1 + closed_loop.TRACE_COLUMNS.index("x_estimated_m")]
+    compiled = compiled_sim.advance(n_ref)[:, 1 + radial_axis_loop.TRACE_COLUMNS.index("x_estimated_m")]
     scale = np.max(np.abs(reference))
     return {
         "exercise": "kalman_noise (nonlinear plant, estimated feedback, 4-state filter)",

@@ -8,8 +8,8 @@ import time
 import viser
 
 from app.session import LabSession
-from lab_modules.bearing_scene import CAMERA_POSITION
 from lab_modules.exercises import get
+from lab_modules.scenes.bearing import CAMERA_POSITION
 
 
 def serve(host: str = "127.0.0.1", port: int = 8080, exercise: str = "kalman_noise") -> None:

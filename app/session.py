@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 import viser
 
-from lab_modules.bearing_scene import CANVAS_PX
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, registry
 from lab_modules.parameters import Parameter, ParameterError
+from lab_modules.scenes.bearing import CANVAS_PX
 
 STATIC = Path(__file__).resolve().parent.parent / "static"
 FRAME_S = 1 / 25                  # display refresh

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .parameters import ParameterError
+from lab_modules.parameters import ParameterError
 
 COLUMNS = ("time_s", "reference_mm", "measured_position_mm", "coil_voltage_v")
 #: Upper size of an accepted file: 1 h at 1 kHz is about 130 MB, far beyond a

@@ -12,7 +12,7 @@ import argparse
 from pathlib import Path
 
 from lab_modules import recordings
-from lab_modules.maglev_simulation import record_lead_lag_run
+from lab_modules.loops.maglev_loop import record_lead_lag_run
 
 SHIPPED = Path(__file__).resolve().parent.parent / "static" / "recordings" / "maglev_leadlag.csv"
 SHIPPED_SETTINGS = {"duration_s": 6.0, "still_s": 1.0, "sensor_noise_m": 3.4e-6, "seed": 2005}

@@ -6,11 +6,12 @@ import numpy as np
 import pytest
 from scipy.optimize import linear_sum_assignment
 
-from lab_modules import analysis, closed_loop
-from lab_modules.amb_axis import RIG
-from lab_modules.axis_simulation import AxisSimulation
-from lab_modules.controllers import pid
+from lab_modules import analysis
+from lab_modules.controllers.pid import pid
 from lab_modules.exercises.kalman_noise import EXERCISE, setup
+from lab_modules.loops import radial_axis_loop
+from lab_modules.loops.radial_axis_experiment import AxisSimulation
+from lab_modules.plants.radial_bearing import RIG
 
 T = RIG.sample_time_s
 LAGS_S = [0.0, 200e-6]
@@ -98,11 +99,11 @@ def test_noise_rms_matches_long_linear_simulation(use_estimate):
     predicted = axis.noise_rms()
     sim = AxisSimulation(axis, seed=7)
     trace = sim.advance(round(20.0 / T))
-    assert sim.status == closed_loop.OK
+    assert sim.status == radial_axis_loop.OK
     trace = trace[round(0.1 / T):]
     columns = {"x_m": "x_true_m", "current_reference_v": "current_reference_v", "current_a": "current_a"}
     for output, column in columns.items():
-        signal = trace[:, 1 + closed_loop.TRACE_COLUMNS.index(column)]
+        signal = trace[:, 1 + radial_axis_loop.TRACE_COLUMNS.index(column)]
         simulated = np.sqrt(np.mean(signal**2))
         assert simulated == pytest.approx(predicted[output], rel=0.10), output
 

@@ -5,9 +5,9 @@ viser's SceneApi."""
 import numpy as np
 import pytest
 
-from lab_modules import bearing_scene as bs
-from lab_modules.amb_axis import RIG
 from lab_modules.exercises import registry
+from lab_modules.plants.radial_bearing import RIG
+from lab_modules.scenes import bearing as bs
 
 
 class Handle:

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from app.cli import main
-from lab_modules.ekf_loop import TOUCHDOWN, EKFLoopSimulation, column
 from lab_modules.exercises import ekf_disturbance, ekf_parameters
+from lab_modules.loops.radial_axis_ekf_loop import TOUCHDOWN, EKFLoopSimulation, column
 from lab_modules.parameters import ParameterError
 
 DISTURBANCE = ekf_disturbance.EXERCISE
@@ -124,7 +124,7 @@ def test_analysis_has_fig_5_plots_and_consistent_readouts():
 def test_true_local_values_in_the_trace_are_eq_10_derivatives():
     sim = PARAMETERS.simulation(PARAMETERS.resolve())
     trace = sim.advance(500)
-    from lab_modules.amb_axis import RIG
+    from lab_modules.plants.radial_bearing import RIG
     k = 400
     kx, ki = RIG.local_factors(column(trace, "x_true_m")[k], column(trace, "current_a")[k])
     assert column(trace, "kx_true_n_per_m")[k] == pytest.approx(kx, rel=1e-12)

@@ -10,8 +10,8 @@ import scipy.linalg
 from filterpy.kalman import ExtendedKalmanFilter
 from scipy.stats import chi2
 
-from lab_modules import extended_filters as ef
-from lab_modules.amb_axis import DEFAULT_SENSOR_LAG_S, RIG
+from lab_modules.estimators import extended_kalman as ef
+from lab_modules.plants.radial_bearing import DEFAULT_SENSOR_LAG_S, RIG
 
 T = RIG.sample_time_s
 PHYSICS = ef.physics_vector(RIG, DEFAULT_SENSOR_LAG_S)

@@ -1,5 +1,5 @@
 """The linear Kalman filter of eq. 2 (lab_modules.estimators) and its use in
-the compiled closed loop (lab_modules.axis_simulation).
+the compiled closed loop (lab_modules.loops.radial_axis_experiment).
 
 Covariances hold entries from ~1e-14 m^2 to ~1 A^2, so they are compared
 entry by entry relative to sqrt(P_ii P_jj) (the scale of that entry), not
@@ -12,11 +12,12 @@ import scipy.linalg
 import scipy.stats
 from filterpy.kalman import KalmanFilter as FilterpyKalmanFilter
 
-from lab_modules import analysis, closed_loop
-from lab_modules.amb_axis import RIG
-from lab_modules.axis_simulation import AxisSimulation
-from lab_modules.estimators import KalmanFilter
+from lab_modules import analysis
+from lab_modules.estimators.kalman import KalmanFilter
 from lab_modules.exercises.kalman_noise import EXERCISE, setup
+from lab_modules.loops import radial_axis_loop
+from lab_modules.loops.radial_axis_experiment import AxisSimulation
+from lab_modules.plants.radial_bearing import RIG
 
 LAGS_S = [0.0, 200e-6]
 T = RIG.sample_time_s
@@ -93,7 +94,7 @@ def test_covariance_stays_symmetric_psd_over_a_million_steps(overrides):
     axis = setup(EXERCISE.resolve(overrides))
     sim = AxisSimulation(axis, seed=1)
     sim.advance(10**6)
-    assert sim.status == closed_loop.OK
+    assert sim.status == radial_axis_loop.OK
     assert sim.step == 10**6
     P = np.array(sim.filter.covariance)
     assert np.all(np.isfinite(P))
@@ -133,7 +134,7 @@ def test_running_filter_converges_to_dare(sensor_lag_s):
     axis = kalman_noise_setup(sensor_lag_s=sensor_lag_s, nonlinear=False)
     sim = AxisSimulation(axis, seed=2)
     sim.advance(round(0.2 / T))
-    assert sim.status == closed_loop.OK
+    assert sim.status == radial_axis_loop.OK
     A, _, C = model_matrices(axis)
     R = axis.filter_R
     P_dare = dare_covariance(A, C, axis.filter_Q, R)
@@ -167,7 +168,7 @@ def test_nees_is_chi_square_consistent_on_linear_plant(sensor_lag_s, use_estimat
         for j, k in enumerate(CHECKPOINTS):
             sim.advance(k - done)
             done = k
-            assert sim.status == closed_loop.OK
+            assert sim.status == radial_axis_loop.OK
             # after advance(k): plant holds the true state of sample k (x, v, i, x_d),
             # the filter the prediction x_{k|k-1} and P_{k|k-1}
             error = sim.plant[:n] - sim.filter.x
@@ -188,7 +189,7 @@ def test_live_consistency_readouts_flag_a_mistuned_filter(r_position_scale, cons
     makes the filter overconfident (mean > 3), ten times too large underconfident (< 0.3)."""
     values = EXERCISE.resolve({"filter_r_position": 7.1e-4 * r_position_scale})
     trace = EXERCISE.simulation(values).advance(40_000)[4_000:]      # 2 s, after the P0 transient
-    columns = {name: trace[:, 1 + k] for k, name in enumerate(closed_loop.TRACE_COLUMNS)}
+    columns = {name: trace[:, 1 + k] for k, name in enumerate(radial_axis_loop.TRACE_COLUMNS)}
     readouts = {label: value for label, value, _ in EXERCISE.live_readouts(columns)}
     inside = readouts["Estimate error inside ±3σ"]
     mean_square = readouts["Mean (error/σ)² of x, 1 = consistent"]

@@ -1,4 +1,4 @@
-"""Flexible rotor (lab_modules/flexible_rotor.py) and the sensor_placement exercise:
+"""Flexible rotor (lab_modules/plants/flexible_rotor.py, loops/flexible_rotor_loop.py) and the sensor_placement exercise:
 beam elements against closed-form Euler-Bernoulli frequencies, mesh convergence,
 the modal plant against the rigid one-axis model, the loop against
 python-control's interconnect, the Kalman compensator against filterpy, and
@@ -16,20 +16,17 @@ import pytest
 from filterpy.kalman import KalmanFilter
 
 from lab_modules import analysis
-from lab_modules.amb_axis import RIG, BearingAxis
-from lab_modules.controllers import pid
+from lab_modules.controllers.pid import pid
 from lab_modules.exercises import sensor_placement as sp
-from lab_modules.flexible_rotor import (
-    LOOP_INPUTS,
+from lab_modules.loops.flexible_rotor_loop import LOOP_INPUTS, LoopSimulation, closed_loop, kalman_compensator
+from lab_modules.plants.flexible_rotor import (
     FlexibleRotor,
-    LoopSimulation,
     assemble_beam,
-    closed_loop,
     hermite_interpolate,
-    kalman_compensator,
     modal_plant,
     solve_modes,
 )
+from lab_modules.plants.radial_bearing import RIG, BearingAxis
 
 REPO = Path(__file__).resolve().parents[1]
 T = RIG.sample_time_s

@@ -12,10 +12,16 @@ from scipy.optimize import linear_sum_assignment
 
 from app.cli import main
 from lab_modules import analysis
-from lab_modules.amb_axis import RIG
-from lab_modules.axis_simulation import AxisSimulation
-from lab_modules.controllers import PAPER_LQG, PAPER_LQR_WEIGHTS, StateFeedback, integral_augmented_model, lqr
+from lab_modules.controllers.lqr import (
+    PAPER_LQG,
+    PAPER_LQR_WEIGHTS,
+    StateFeedback,
+    integral_augmented_model,
+    lqr,
+)
 from lab_modules.exercises.lqg_vs_pid import EXERCISE, SideBySide, column, setups, step_response
+from lab_modules.loops.radial_axis_experiment import AxisSimulation
+from lab_modules.plants.radial_bearing import RIG
 
 T = RIG.sample_time_s
 #: eq. 16-17 restricted to the fourth-order linear filter (x, v, i, x_d) of Fig. 7

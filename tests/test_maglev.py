@@ -9,24 +9,22 @@ import scipy.integrate
 import scipy.linalg
 from filterpy.kalman import ExtendedKalmanFilter
 
-from lab_modules.continuous_discrete_ekf import ContinuousDiscreteEKF, ContinuousTimeEKF
-from lab_modules.maglev import (
-    LEAD_LAG,
-    TABLE_3_1,
+from lab_modules.controllers.feedback_linearisation import (
     decoupling_gain_v_per_m_s3,
-    derivative,
     feedback_gain,
-    jacobian,
     linearising_control,
     linearising_coordinates,
 )
-from lab_modules.maglev_simulation import (
+from lab_modules.controllers.lead_lag import LEAD_LAG
+from lab_modules.estimators.continuous_discrete_ekf import ContinuousDiscreteEKF, ContinuousTimeEKF
+from lab_modules.loops.maglev_loop import (
     MaglevSetup,
     MaglevSimulation,
     Reference,
     ReferenceGenerator,
     table_3_1_q,
 )
+from lab_modules.plants.maglev_ball import TABLE_3_1, derivative, jacobian
 
 P = TABLE_3_1.constants()
 X_EQ = np.array([0.0148, 0.0, TABLE_3_1.equilibrium_current_a(0.0148)])
@@ -57,7 +55,7 @@ def test_equilibrium_current_matches_table_3_1():
 
 
 def test_jacobian_matches_finite_differences():
-    """Eq. 2.44 (with the corrected factor 2, see maglev.py) against central differences."""
+    """Eq. 2.44 (with the corrected factor 2, see plants/maglev_ball.py) against central differences."""
     x = np.array([0.0151, 0.03, 0.95])
     F = jacobian(x, P)
     steps = np.array([1e-7, 1e-6, 1e-6])

@@ -7,10 +7,10 @@ import pytest
 import viser.transforms as tf
 from test_bearing_scene import Handle, RecordingScene
 
-from lab_modules import maglev_scene as ms
-from lab_modules.bearing_scene import CAMERA_POSITION
 from lab_modules.exercises import registry
-from lab_modules.maglev import TABLE_3_1
+from lab_modules.plants.maglev_ball import TABLE_3_1
+from lab_modules.scenes import maglev as ms
+from lab_modules.scenes.bearing import CAMERA_POSITION
 
 ROOT, FRONT = ms.ROOT, ms.FRONT
 

@@ -12,7 +12,7 @@ import pytest
 
 from lab_modules import recordings
 from lab_modules.exercises import maglev_tracking, maglev_tuning
-from lab_modules.maglev_simulation import record_lead_lag_run
+from lab_modules.loops.maglev_loop import record_lead_lag_run
 from lab_modules.parameters import ParameterError
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -1,4 +1,4 @@
-"""Physics of one bearing axis (lab_modules.amb_axis) against paper 000.
+"""Physics of one bearing axis (lab_modules.plants.radial_bearing) against paper 000.
 
 Paper: Schuhmann, Hofmann, Werner, "Adaptive Linear and Extended Kalman Filter
 applied to AMB with Collocated Position Measuring", eq. 3-4, 10, 12 and the
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import scipy.signal
 
-from lab_modules.amb_axis import RIG
+from lab_modules.plants.radial_bearing import RIG
 
 # Appendix of paper 000
 PAPER_KX_N_PER_M = 800310.0

@@ -4,7 +4,7 @@ faces, so an inward winding would show the far inside of a part instead of its n
 import numpy as np
 import pytest
 
-from lab_modules.rotor_scene import shaft_mesh, tube
+from lab_modules.scenes.rotor import shaft_mesh, tube
 
 
 def signed_volume(vertices, faces) -> float:

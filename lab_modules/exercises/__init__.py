@@ -9,7 +9,8 @@ from typing import Protocol
 
 import numpy as np
 
-from ..parameters import Parameter, ParameterError, resolve
+from lab_modules.claims import Claim
+from lab_modules.parameters import Parameter, ParameterError, resolve
 
 
 @dataclass(frozen=True)
@@ -101,6 +102,7 @@ class Exercise:
     default_duration_s: float = 1.0
     data_description: str | None = None   # set: the exercise accepts an uploaded CSV
     download_label: str | None = None     # set: a button offers ``download(values)`` as a file
+    claims: tuple[Claim, ...] = ()        # the paper's headline results, measured by ``metrics``
 
     def resolve(self, overrides: dict | None = None) -> dict:
         overrides = dict(overrides or {})

@@ -12,8 +12,8 @@ from functools import lru_cache
 import control
 import numpy as np
 
-from ..amb_axis import RIG
-from ..controllers import pid
+from lab_modules.controllers.pid import pid
+from lab_modules.plants.radial_bearing import RIG
 
 #: ``controllers.pid`` remembered per setting: its Tustin discretisation takes
 #: milliseconds, most slider moves leave the gains alone, and the analyses
@@ -29,7 +29,7 @@ def pid_from_values(values: dict, gain_factor: float = 1.0) -> control.StateSpac
 
 
 def ekf_loop_fields(values: dict) -> dict:
-    """The ``ekf_loop.EKFLoopSetup`` fields that the EKF exercises read from the same
+    """The ``radial_axis_ekf_loop.EKFLoopSetup`` fields that the EKF exercises read from the same
     sliders: the PID and its feedback source, the measurement variances R (eq. 16)
     and the plant's noise."""
     return {"controller": pid_from_values(values),

@@ -1,7 +1,7 @@
 """Exercise ``ekf_disturbance``: the nonlinear EKF that estimates an unknown
 force and reads k_x, k_i from its Jacobian (paper 000, §III-B, Figs. 4-5).
 
-The filter is ``extended_filters.DisturbanceEKF``: states (x, v, i, x_d, f_z)
+The filter is ``extended_kalman.DisturbanceEKF``: states (x, v, i, x_d, f_z)
 (eq. 13), force law eq. 10, sensor lag eq. 12, prediction by RK4, Phi by the
 truncated series eq. 15, R and Q of eq. 16-17.  The paper's PID holds the
 rotor on the filter's undelayed position estimate (§III-B); the estimated
@@ -24,7 +24,7 @@ band of ±5 % of the step.  The noise of the estimate is reported separately.
 
 Choices not in the paper (worksheet "Choices"):
 
-* T_mx = 200 µs (``amb_axis.DEFAULT_SENSOR_LAG_S``), in plant and filter.
+* T_mx = 200 µs (``radial_bearing.DEFAULT_SENSOR_LAG_S``), in plant and filter.
 * q_33 = 1e-3 A² instead of eq. 17's 0.43 A².  The paper's value covers the
   real amplifier's unmodelled behaviour; the simulated amplifier follows eq. 4
   exactly (1 mA noise per sample), so 0.43 A² only lets the 1.87 A current
@@ -44,11 +44,13 @@ from dataclasses import replace
 import control
 import numpy as np
 
-from .. import analysis
-from .. import extended_filters as ef
-from ..amb_axis import DEFAULT_SENSOR_LAG_S, RIG
-from ..bearing_scene import ESTIMATE_RED, MEASURED_GREY, BearingScene, Ghost
-from ..ekf_loop import (
+from lab_modules import analysis
+from lab_modules.estimators import extended_kalman as ef
+from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises._common import ekf_loop_fields
+from lab_modules.exercises.ekf_parameters import PARAMETERS as EKF_PARAMETERS_EXERCISE_PARAMETERS
+from lab_modules.exercises.kalman_noise import PARAMETERS as NOISE_EXERCISE_PARAMETERS
+from lab_modules.loops.radial_axis_ekf_loop import (
     EKFLoopSetup,
     EKFLoopSimulation,
     Ramp,
@@ -58,11 +60,9 @@ from ..ekf_loop import (
     column,
     no_input,
 )
-from ..parameters import Parameter
-from . import Analysis, Chart, Exercise, Plot, Series
-from ._common import ekf_loop_fields
-from .ekf_parameters import PARAMETERS as EKF_PARAMETERS_EXERCISE_PARAMETERS
-from .kalman_noise import PARAMETERS as NOISE_EXERCISE_PARAMETERS
+from lab_modules.parameters import Parameter
+from lab_modules.plants.radial_bearing import DEFAULT_SENSOR_LAG_S, RIG
+from lab_modules.scenes.bearing import ESTIMATE_RED, MEASURED_GREY, BearingScene, Ghost
 
 T = RIG.sample_time_s
 SETTLING_BAND = 0.05

@@ -1,6 +1,6 @@
 """Exercise ``ekf_parameters``: an EKF that estimates k_i and k_x (paper 000, §III-A).
 
-The filter is ``extended_filters.ParameterEKF``: the linearised bearing model
+The filter is ``extended_kalman.ParameterEKF``: the linearised bearing model
 of §II with the state augmented by the force-current and force-position
 factors (eq. 8-9), running against the nonlinear plant of eq. 10-12 held by
 the paper's PID.  The paper reports that the parameter estimates need "an
@@ -35,14 +35,14 @@ from dataclasses import replace
 
 import numpy as np
 
-from .. import extended_filters as ef
-from ..amb_axis import RIG
-from ..bearing_scene import ESTIMATE_RED, MEASURED_GREY, BearingScene, Ghost
-from ..ekf_loop import EKFLoopSetup, EKFLoopSimulation, Prbs, column
-from ..parameters import Parameter
-from . import Analysis, Chart, Exercise, Plot, Series
-from ._common import ekf_loop_fields
-from .kalman_noise import PARAMETERS as NOISE_EXERCISE_PARAMETERS
+from lab_modules.estimators import extended_kalman as ef
+from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises._common import ekf_loop_fields
+from lab_modules.exercises.kalman_noise import PARAMETERS as NOISE_EXERCISE_PARAMETERS
+from lab_modules.loops.radial_axis_ekf_loop import EKFLoopSetup, EKFLoopSimulation, Prbs, column
+from lab_modules.parameters import Parameter
+from lab_modules.plants.radial_bearing import RIG
+from lab_modules.scenes.bearing import ESTIMATE_RED, MEASURED_GREY, BearingScene, Ghost
 
 T = RIG.sample_time_s
 KI_RATED, KX_RATED = RIG.ki_n_per_a, RIG.kx_n_per_m

@@ -21,14 +21,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import analysis
-from ..amb_axis import DEFAULT_SENSOR_LAG_S, RIG
-from ..axis_simulation import AxisSetup, AxisSimulation
-from ..bearing_scene import ESTIMATE_RED, MEASURED_GREY, BearingScene, Ghost
-from ..closed_loop import TRACE_COLUMNS
-from ..parameters import Parameter
-from . import Analysis, Chart, Exercise, Plot, Series
-from ._common import pid_from_values
+from lab_modules import analysis
+from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises._common import pid_from_values
+from lab_modules.loops.radial_axis_experiment import AxisSetup, AxisSimulation
+from lab_modules.loops.radial_axis_loop import TRACE_COLUMNS
+from lab_modules.parameters import Parameter
+from lab_modules.plants.radial_bearing import DEFAULT_SENSOR_LAG_S, RIG
+from lab_modules.scenes.bearing import ESTIMATE_RED, MEASURED_GREY, BearingScene, Ghost
 
 T = RIG.sample_time_s
 K_MX = RIG.position_sensor_gain_v_per_m

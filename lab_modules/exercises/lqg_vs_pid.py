@@ -4,7 +4,7 @@ Paper 000 (Schuhmann, Hofmann, Werner), §IV, eq. 19-22, Figs. 7-9 and
 Appendix.  With the Kalman filter every state (x, v, i) is available, so a
 discrete LQR (eq. 19-21) plus the paper's superimposed integral controller
 can act on the estimate: u = i_ref = -K x_hat + K_I xi, xi the integral of
-the position error (``controllers.StateFeedback`` states the units the lab
+the position error (``controllers.lqr.StateFeedback`` states the units the lab
 reads into eq. 22).  It is compared, on the same noise, with the paper's
 root-locus PID (K = 0.65, T_I = 50 ms, T_D = 3 ms) on a 50 µm reference step
 (Fig. 8) and a 400 N disturbance step (Fig. 9); the pole map sets the
@@ -29,15 +29,21 @@ from dataclasses import replace
 
 import numpy as np
 
-from .. import analysis
-from ..amb_axis import RIG
-from ..axis_simulation import AxisSetup, AxisSimulation
-from ..bearing_scene import ESTIMATE_RED, TRUE_BLUE, BearingScene, Ghost
-from ..closed_loop import OK, TRACE_COLUMNS
-from ..controllers import PAPER_LQG, PAPER_LQR_WEIGHTS, StateFeedback, integral_augmented_model, lqr
-from ..parameters import Parameter
-from . import Analysis, Chart, Exercise, Plot, Series, kalman_noise
-from ._common import pid_from_values
+from lab_modules import analysis
+from lab_modules.controllers.lqr import (
+    PAPER_LQG,
+    PAPER_LQR_WEIGHTS,
+    StateFeedback,
+    integral_augmented_model,
+    lqr,
+)
+from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series, kalman_noise
+from lab_modules.exercises._common import pid_from_values
+from lab_modules.loops.radial_axis_experiment import AxisSetup, AxisSimulation
+from lab_modules.loops.radial_axis_loop import OK, TRACE_COLUMNS
+from lab_modules.parameters import Parameter
+from lab_modules.plants.radial_bearing import RIG
+from lab_modules.scenes.bearing import ESTIMATE_RED, TRUE_BLUE, BearingScene, Ghost
 
 T = RIG.sample_time_s
 LOOPS = ("LQG", "PID")

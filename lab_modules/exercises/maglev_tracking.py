@@ -21,16 +21,15 @@ from dataclasses import replace
 import control
 import numpy as np
 
-from ..maglev import (
+from lab_modules.controllers.feedback_linearisation import (
     GUARD_CURRENT_A,
-    LEAD_LAG,
-    TABLE_3_1,
     brunovsky_chain,
     decoupling_gain_v_per_m_s3,
     linearising_control,
 )
-from ..maglev_scene import Columns, DrawingScale, MaglevScene, exaggeration_for
-from ..maglev_simulation import (
+from lab_modules.controllers.lead_lag import LEAD_LAG
+from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.loops.maglev_loop import (
     CONTROLLERS,
     FILTERS,
     MaglevSetup,
@@ -39,9 +38,10 @@ from ..maglev_simulation import (
     preset_q,
     record_lead_lag_run,
 )
-from ..parameters import Parameter, ParameterError
-from ..recordings import to_csv
-from . import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.parameters import Parameter, ParameterError
+from lab_modules.plants.maglev_ball import TABLE_3_1
+from lab_modules.recordings import to_csv
+from lab_modules.scenes.maglev import Columns, DrawingScale, MaglevScene, exaggeration_for
 
 T = TABLE_3_1.sample_time_s
 GAP_M = TABLE_3_1.operating_gap_m

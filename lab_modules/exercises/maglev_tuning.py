@@ -25,13 +25,13 @@ import control
 import numpy as np
 import scipy.stats
 
-from .. import recordings
-from ..continuous_discrete_ekf import OBSERVER_COLUMNS, run_observer
-from ..maglev import TABLE_3_1
-from ..maglev_scene import DRAWN_GAP_MAX_M, Columns, DrawingScale, MaglevScene, exaggeration_for
-from ..maglev_simulation import preset_q
-from ..parameters import Parameter, ParameterError
-from . import Analysis, Chart, Exercise, Plot, Series
+from lab_modules import recordings
+from lab_modules.estimators.continuous_discrete_ekf import OBSERVER_COLUMNS, run_observer
+from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.loops.maglev_loop import preset_q
+from lab_modules.parameters import Parameter, ParameterError
+from lab_modules.plants.maglev_ball import TABLE_3_1
+from lab_modules.scenes.maglev import DRAWN_GAP_MAX_M, Columns, DrawingScale, MaglevScene, exaggeration_for
 
 SHIPPED_RECORDING = Path(__file__).resolve().parents[2] / "static" / "recordings" / "maglev_leadlag.csv"
 NIS_WINDOW = 100            # samples per NIS average (0.1 s at 1 kHz)

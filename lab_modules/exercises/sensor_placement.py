@@ -42,23 +42,21 @@ import control
 import numpy as np
 import scipy.signal
 
-from .. import analysis
-from ..amb_axis import RIG
-from ..flexible_rotor import (
+from lab_modules import analysis
+from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises._common import pid_from_values
+from lab_modules.loops.flexible_rotor_loop import (
     LOOP_OUTPUTS,
-    FlexibleRotor,
     LoopSimulation,
-    RotorGeometry,
     closed_loop,
     discrete_plant,
     kalman_compensator,
-    modal_plant,
     pid_compensator,
 )
-from ..parameters import Parameter
-from ..rotor_scene import RotorScene
-from . import Analysis, Chart, Exercise, Plot, Series
-from ._common import pid_from_values
+from lab_modules.parameters import Parameter
+from lab_modules.plants.flexible_rotor import FlexibleRotor, RotorGeometry, modal_plant
+from lab_modules.plants.radial_bearing import RIG
+from lab_modules.scenes.rotor import RotorScene
 
 T = RIG.sample_time_s
 K_MX, K_MI = RIG.position_sensor_gain_v_per_m, RIG.current_sensor_gain_v_per_a

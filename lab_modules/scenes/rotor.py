@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .flexible_rotor import FlexibleRotor
+from lab_modules.plants.flexible_rotor import FlexibleRotor
 
 AMPLITUDE_M = 0.05              # drawn peak deflection of the shown mode
 VIEW_SCALE = 4.0                # the rotor is drawn four times life size

@@ -14,9 +14,10 @@ from functools import cached_property
 import control
 import numpy as np
 
-from . import analysis, closed_loop
-from .amb_axis import RIG, BearingAxis
-from .estimators import KalmanFilter, pad_vector
+from lab_modules import analysis
+from lab_modules.estimators.kalman import KalmanFilter, pad_vector
+from lab_modules.loops import radial_axis_loop
+from lab_modules.plants.radial_bearing import RIG, BearingAxis
 
 
 @dataclass(frozen=True)
@@ -149,7 +150,7 @@ class AxisSimulation:
     while other simulations run on other threads.
     """
 
-    columns = closed_loop.TRACE_COLUMNS
+    columns = radial_axis_loop.TRACE_COLUMNS
 
     def __init__(self, setup: AxisSetup, seed: int = 0):
         self.setup = setup
@@ -175,7 +176,7 @@ class AxisSimulation:
                                   rig.position_sensor_gain_v_per_m, rig.current_sensor_gain_v_per_a])
         self._u_limit = rig.current_limit_a / rig.amplifier_gain_a_per_v
         self.step = 0
-        self.status = closed_loop.OK
+        self.status = radial_axis_loop.OK
 
     def retuned(self, setup: AxisSetup) -> AxisSimulation:
         """A simulation with new settings that carries on from this one's state
@@ -213,15 +214,15 @@ class AxisSimulation:
 
     def advance(self, n_steps: int) -> np.ndarray:
         """Run ``n_steps`` samples (fewer if the rotor touches down or diverges);
-        return the trace array, columns ``closed_loop.TRACE_COLUMNS``, with a
+        return the trace array, columns ``radial_axis_loop.TRACE_COLUMNS``, with a
         leading time column [s]."""
-        if self.status != closed_loop.OK or n_steps <= 0:
-            return np.empty((0, len(closed_loop.TRACE_COLUMNS) + 1))
+        if self.status != radial_axis_loop.OK or n_steps <= 0:
+            return np.empty((0, len(radial_axis_loop.TRACE_COLUMNS) + 1))
         reference, disturbance = self.inputs(n_steps)
         noise = self.noise(n_steps)
-        trace = np.empty((n_steps, len(closed_loop.TRACE_COLUMNS) + 1))
+        trace = np.empty((n_steps, len(radial_axis_loop.TRACE_COLUMNS) + 1))
         kf = self.filter
-        status, done = closed_loop.run(
+        status, done = radial_axis_loop.run(
             n_steps, self.step, self.plant, *self._plant_linear, self.setup.nonlinear, self._physics,
             kf._x, kf.P, kf.A, kf.B, kf.C, kf.Q, kf.R_diag,
             self.ctrl, *self._ctrl_matrices, self._state_gain, self._u_limit, self.setup.use_estimate,
@@ -239,12 +240,12 @@ class AxisSimulation:
     def status_message(self) -> str:
         """What happened, in words, for a stopped simulation ('' while running)."""
         t_ms = self.time_s * 1e3
-        if self.status == closed_loop.TOUCHDOWN:
+        if self.status == radial_axis_loop.TOUCHDOWN:
             return (f"Touchdown at t = {t_ms:.1f} ms: the rotor left the air gap "
                     f"(|x| >= {self.setup.rig.touchdown_m * 1e6:.0f} µm). The loop is unstable, saturated "
                     "or cannot hold the load at these settings (a filter without a disturbance state "
                     "leaves estimated feedback without integral action against a force); reset.")
-        if self.status == closed_loop.DIVERGED:
+        if self.status == radial_axis_loop.DIVERGED:
             return (f"Diverged at t = {t_ms:.1f} ms: the simulation produced non-finite values. "
                     "Reset with other settings.")
         return ""

@@ -43,8 +43,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from .estimators import update_scalar
-from .maglev import TABLE_3_1, MaglevPlant, derivative, jacobian
+from lab_modules.estimators.kalman import update_scalar
+from lab_modules.plants.maglev_ball import TABLE_3_1, MaglevPlant, derivative, jacobian
 
 _JIT = {"nogil": True, "cache": True}
 

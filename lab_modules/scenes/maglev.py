@@ -25,12 +25,12 @@ inconsistent in itself: a solid steel ball of 19.05 mm weighs 28 g, not the
 uses the stated mass.
 
 Warning colour: the ball turns amber when the state nears the region the
-controller guards (x1 -> 0, x3 -> 0; ``maglev.GUARD_GAP_M``,
+controller guards (x1 -> 0, x3 -> 0; ``feedback_linearisation.GUARD_GAP_M``,
 ``GUARD_CURRENT_A``), i.e. gap below ``WARN_GAP_M``, current below
 ``WARN_CURRENT_A``, or a guarded controller step, and dark red once the ball has
 struck the magnet or dropped out of reach (the simulation's touchdown limits).
 
-Framing as the bearing's (``bearing_scene.view_pose``): the lab's camera,
+Framing as the bearing's (``scenes.bearing.view_pose``): the lab's camera,
 the magnet's face centred on ``FACE_CENTRE_PX`` in the 3D canvas between the
 docked panels, ``PX_PER_MM`` pixels per millimetre.
 """
@@ -43,7 +43,10 @@ from dataclasses import dataclass
 import numpy as np
 import viser.transforms as tf
 
-from .bearing_scene import (
+from lab_modules.controllers.feedback_linearisation import GUARD_CURRENT_A, GUARD_GAP_M
+from lab_modules.loops.maglev_loop import MAX_GAP_M, MIN_GAP_M
+from lab_modules.plants.maglev_ball import TABLE_3_1
+from lab_modules.scenes.bearing import (
     BEARING_FORCE_GREEN,
     CAMERA_POSITION,
     DISTURBANCE_PURPLE,
@@ -55,9 +58,7 @@ from .bearing_scene import (
     set_if_changed,
     view_pose,
 )
-from .maglev import GUARD_CURRENT_A, GUARD_GAP_M, TABLE_3_1
-from .maglev_simulation import MAX_GAP_M, MIN_GAP_M
-from .rotor_scene import tube
+from lab_modules.scenes.rotor import tube
 
 ROOT = "/maglev_view"
 FRONT = f"{ROOT}/front"                  # markers, ruler and arrows, in front of the ball

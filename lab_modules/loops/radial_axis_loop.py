@@ -22,8 +22,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from .controllers import controller_step
-from .estimators import STATE_SIZE, predict, update
+from lab_modules.controllers.pid import controller_step
+from lab_modules.estimators.kalman import STATE_SIZE, predict, update
 
 OK, DIVERGED, TOUCHDOWN = 0, 1, 2
 

@@ -24,9 +24,11 @@ import control
 import numba
 import numpy as np
 
-from .continuous_discrete_ekf import bucy_step, propagate, update
-from .controllers import controller_step
-from .maglev import LEAD_LAG, TABLE_3_1, LeadLag, MaglevPlant, feedback_gain, linearising_control, rk4_step
+from lab_modules.controllers.feedback_linearisation import feedback_gain, linearising_control
+from lab_modules.controllers.lead_lag import LEAD_LAG, LeadLag
+from lab_modules.controllers.pid import controller_step
+from lab_modules.estimators.continuous_discrete_ekf import bucy_step, propagate, update
+from lab_modules.plants.maglev_ball import TABLE_3_1, MaglevPlant, rk4_step
 
 OK, STRUCK_MAGNET, FELL, DIVERGED = 0, 1, 2, 3
 STATUS_TEXT = {
@@ -288,7 +290,7 @@ def record_lead_lag_run(duration_s: float = 6.0, still_s: float = 1.0, sensor_no
     densities ``plant_Q`` (default ``RECORDING_PLANT_Q``).  Returns a
     ``recordings.Recording`` whose metadata states the noise used.
     """
-    from .recordings import Recording
+    from lab_modules.recordings import Recording
 
     plant_Q = RECORDING_PLANT_Q if plant_Q is None else np.asarray(plant_Q, dtype=float)
     gap = TABLE_3_1.operating_gap_m

@@ -28,7 +28,7 @@ and eq. 15 for §III-B only; the lab uses the same discretisation for §III-A so
 that the two filters differ only in their model.
 
 The compiled kernels (``predict`` here, ``update``) work in place so that the
-closed loop (``lab_modules.ekf_loop``) can call them every 50 µs; the two
+closed loop (``lab_modules.loops.radial_axis_ekf_loop``) can call them every 50 µs; the two
 classes wrap them for step-by-step use.  ``physics`` is the float64 vector
 (m, c_f, i0, delta0, cos(alpha), T_a, K_a, T_mx, T, K_mx, K_mi) of
 ``physics_vector``, the layout of ``lab_modules.closed_loop``.
@@ -39,8 +39,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from .amb_axis import DEFAULT_SENSOR_LAG_S, RIG, BearingAxis
-from .estimators import propagate_covariance, update
+from lab_modules.estimators.kalman import propagate_covariance, update
+from lab_modules.plants.radial_bearing import DEFAULT_SENSOR_LAG_S, RIG, BearingAxis
 
 _JIT = {"nogil": True, "cache": True}
 

@@ -34,7 +34,7 @@ STATE_SIZE = 4
 
 
 # The kernels below serve any number of states ``n_states``; the extended
-# filters (``extended_filters``, 5 states; ``continuous_discrete_ekf``, 3)
+# filters (``extended_kalman``, 5 states; ``continuous_discrete_ekf``, 3)
 # share them.  Numba inlines them into each compiled caller
 # (``inline="always"``), so the caller's constant (``STATE_SIZE``, ...) fixes the loop lengths at compile time and the
 # compiler unrolls them (about 2x faster than loops of run-time length).

@@ -4,7 +4,7 @@ Paper 000 (Schuhmann, Hofmann, Werner), §III-B and Appendix: an eight-pole
 heteropolar radial bearing of four magnets, each of two adjacent poles that
 sit at the pole angle alpha = pi/8 either side of the magnet's centre (eq. 10);
 rotor laminations 272 mm in diameter; nominal air gap delta0 = 0.460 mm
-(derived from the Appendix in ``amb_axis``).  The bearing is seen along the
+(derived from the Appendix in ``plants.radial_bearing``).  The bearing is seen along the
 shaft with the simulated axis x drawn vertical: the upper magnet carries
 i0 + i (its gap delta0 - x cos alpha closes as x grows, eq. 10), the lower
 one i0 - i.  The horizontal magnets belong to the other axis, which is not
@@ -34,9 +34,9 @@ from dataclasses import dataclass
 import numpy as np
 import viser.transforms as tf
 
-from .amb_axis import RIG
-from .flexible_rotor import RotorGeometry
-from .rotor_scene import tube
+from lab_modules.plants.flexible_rotor import RotorGeometry
+from lab_modules.plants.radial_bearing import RIG
+from lab_modules.scenes.rotor import tube
 
 ROOT = "/bearing_view"
 

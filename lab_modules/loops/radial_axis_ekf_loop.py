@@ -14,7 +14,7 @@ T = 50 µs.  Per sample k:
               force f_z, plus process noise on v and i
 
 The plant is always the nonlinear one of eq. 10-12; the filter is either
-``extended_filters.ParameterEKF``'s model (§III-A) or ``DisturbanceEKF``'s (§III-B).
+``extended_kalman.ParameterEKF``'s model (§III-A) or ``DisturbanceEKF``'s (§III-B).
 """
 
 from __future__ import annotations
@@ -27,11 +27,11 @@ import numba
 import numpy as np
 from scipy.signal import max_len_seq
 
-from . import extended_filters as ef
-from .amb_axis import RIG, BearingAxis
-from .closed_loop import _rk4_step
-from .controllers import controller_step
-from .extended_filters import N_STATES
+from lab_modules.controllers.pid import controller_step
+from lab_modules.estimators import extended_kalman as ef
+from lab_modules.estimators.extended_kalman import N_STATES
+from lab_modules.loops.radial_axis_loop import _rk4_step
+from lab_modules.plants.radial_bearing import RIG, BearingAxis
 
 OK, DIVERGED, TOUCHDOWN, FILTER_DIVERGED = 0, 1, 2, 3
 
@@ -53,7 +53,7 @@ def run(n_steps, model, plant, plant_physics, x_hat, P, Q, R_diag, C, filter_phy
     """Advance the loop by ``n_steps`` samples (see module docstring).
 
     plant : (4,) true (x [m], v [m/s], i [A], x_d [m]), in place.
-    plant_physics, filter_physics : ``extended_filters.physics_vector`` of the
+    plant_physics, filter_physics : ``extended_kalman.physics_vector`` of the
         plant and of the filter (they differ in T_mx when the filter's lag is wrong).
     x_hat, P, Q, R_diag, C : the filter's estimate, covariance and model (in place).
     ctrl, Ac, Bc, Cc, Dc : PID state and discrete matrices (e [V] -> i_ref [V]).
