@@ -70,6 +70,8 @@ class Claim:
     def accept_text(self) -> str:
         """The accepted range as text, e.g. ``">= 75 %"`` or ``"2.9 ... 3.3 N/µm"``."""
         low, high = self.accept
+        if low is not None and low == high:
+            return f"= {low:g} {self.unit}".strip()
         if low is not None and high is not None:
             return f"{low:g} … {high:g} {self.unit}".strip()
         if low is not None:
@@ -88,6 +90,8 @@ def format_value(value: float | None) -> str:
         return PENDING
     if value != value:
         return "not finite"
+    if 1e5 <= abs(value) < 1e9:
+        return f"{value:,.0f}".replace(",", " ")
     return f"{value:.3g}" if 1e-3 <= abs(value) < 1e5 or value == 0 else f"{value:.3e}"
 
 
