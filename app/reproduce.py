@@ -29,10 +29,15 @@ import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from lab_modules.claims import Claim, format_value, settings_text, status
 from lab_modules.exercises import Exercise, claim_run, get, registry
 from lab_modules.parameters import ParameterError
 
+#: What a broken metric or figure raises: reported in the table, not a crash of the whole run.
+MEASUREMENT_ERRORS = (ArithmeticError, AttributeError, IndexError, KeyError, LookupError, RuntimeError,
+                      TypeError, ValueError, ParameterError, np.linalg.LinAlgError)
 FULL_SEEDS = (0, 1, 2)
 QUICK_SEEDS = (0,)
 FIGURE_DPI = 100
@@ -114,7 +119,7 @@ def measure(exercises: list[Exercise], quick: bool, log=None) -> list[Row]:
                     if key not in cache:
                         cache[key] = exercise.metrics(exercise.resolve(dict(key[1])), key[2])
                     row.values.append(row.claim.value_in(cache[key]))
-                except Exception as error:  # a broken metric is a failed claim, not a crash of the table
+                except MEASUREMENT_ERRORS as error:  # a broken metric is a failed claim
                     row.error = f"{type(error).__name__}: {error}"
         if log:
             log(f"{exercise.name}: {len(ex_rows)} claims, {len(cache)} runs, "
@@ -201,7 +206,7 @@ def write_html(directory: Path, rows: list[Row], exercises: list[Exercise], head
             figures = exercise.report_figures(exercise.resolve({}))
             images = "".join(f'<figure><img alt="{html.escape(exercise.name)} figure {i + 1}" '
                              f'src="data:image/png;base64,{_png(f)}"></figure>' for i, f in enumerate(figures))
-        except Exception:
+        except MEASUREMENT_ERRORS:
             images = f"<pre>{html.escape(traceback.format_exc())}</pre>"
             figures = []
         if log:

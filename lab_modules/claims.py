@@ -9,6 +9,7 @@ the same objects, so no lab number is typed twice.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 
@@ -63,7 +64,7 @@ class Claim:
     def holds(self, value: float) -> bool:
         """Whether ``value`` lies in the accepted range (NaN never does)."""
         low, high = self.accept
-        if value != value:
+        if math.isnan(value):
             return False
         return (low is None or value >= low) and (high is None or value <= high)
 
@@ -88,7 +89,7 @@ def format_value(value: float | None) -> str:
     """A lab value for a table: three significant digits, ``…`` while not yet measured."""
     if value is None:
         return PENDING
-    if value != value:
+    if not math.isfinite(value):
         return "not finite"
     if 1e5 <= abs(value) < 1e9:
         return f"{value:,.0f}".replace(",", " ")
@@ -110,19 +111,17 @@ def _cell(text: str) -> str:
 
 def markdown_table(claims: tuple[Claim, ...], values: list[float | None] | None = None) -> str:
     """The paper-vs-lab table of a worksheet: one row per claim with the lab's
-    value (``…`` where ``values`` is None or has None: still being measured)."""
+    value (``…`` where ``values`` is None or has None: still being measured),
+    then the claims' notes (how it is measured; a deviation's reason) as a list."""
     values = values if values is not None else [None] * len(claims)
-    rows = ["| source | quantity | paper | lab | lab holds itself to | status |",
-            "|---|---|---|---|---|---|"]
+    rows = ["| source | quantity | paper | lab | accepted | status |", "|---|---|---|---|---|---|"]
     for claim, value in zip(claims, values):
         lab = format_value(value) + (f" {claim.unit}" if value is not None and claim.unit else "")
-        verdict = status(claim, value)
-        if claim.note:
-            verdict += f": {claim.note}" if claim.deviation else ""
         quantity = claim.quantity + (f" (at {settings_text(claim.settings)})" if claim.settings else "")
         rows.append("| " + " | ".join(_cell(text) for text in (
-            claim.source, quantity, claim.paper, lab, claim.accept_text(), verdict)) + " |")
-    notes = [f"- *{claim.quantity}*: {claim.note}" for claim in claims if claim.note and not claim.deviation]
+            claim.source, quantity, claim.paper, lab, claim.accept_text(), status(claim, value))) + " |")
+    notes = [f"- *{claim.quantity}*{' (deviation)' if claim.deviation else ''}: {claim.note}"
+             for claim in claims if claim.note]
     return "\n".join(rows + ([""] + notes if notes else []))
 
 

@@ -8,7 +8,6 @@ is used (no pyplot), so the caller chooses the backend (Agg in the report).
 
 from __future__ import annotations
 
-import numpy as np
 from matplotlib.figure import Figure
 
 from lab_modules.exercises import Analysis, Exercise, Plot

@@ -21,13 +21,13 @@ from dataclasses import replace
 import control
 import numpy as np
 
+from lab_modules.claims import Claim
 from lab_modules.controllers.feedback_linearisation import (
     GUARD_CURRENT_A,
     brunovsky_chain,
     decoupling_gain_v_per_m_s3,
     linearising_control,
 )
-from lab_modules.claims import Claim
 from lab_modules.controllers.lead_lag import LEAD_LAG
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
 from lab_modules.loops.maglev_loop import (
