@@ -54,12 +54,12 @@ def _parser() -> argparse.ArgumentParser:
         "reproduce", help="measure every exercise's paper claims and print paper vs lab",
         description="Measure every exercise's paper claims (the `claims` of each exercise file) and print "
                     "paper vs lab with the range the lab holds itself to. Exit status 1 if a claim fails. "
-                    "Default: each claim on seeds 0, 1 and 2 (it must hold on all; exercises without a seed "
+                    "Default: each claim on seeds 0 to 4 (it must hold on all; exercises without a seed "
                     "run once). --quick: seed 0 only, each claim at its own settings and run length, as the "
                     "test suite checks it (under 3 minutes on 2 cores).")
     reproduce.add_argument("--json", action="store_true", help="print JSON")
     reproduce.add_argument("--quick", action="store_true",
-                           help="seed 0 only (default: seeds 0, 1, 2; a claim must hold on each)")
+                           help="seed 0 only (default: seeds 0-4; a claim must hold on each)")
     reproduce.add_argument("--html", default=None, metavar="DIR",
                            help="also write DIR/index.html: the table and the figures behind each exercise's "
                                 "claims (PNG embedded)")

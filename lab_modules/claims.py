@@ -91,7 +91,7 @@ def format_value(value: float | None) -> str:
         return PENDING
     if not math.isfinite(value):
         return "not finite"
-    if 1e5 <= abs(value) < 1e9:
+    if 1e4 <= abs(value) < 1e9:
         return f"{value:,.0f}".replace(",", " ")
     return f"{value:.3g}" if 1e-3 <= abs(value) < 1e5 or value == 0 else f"{value:.3e}"
 

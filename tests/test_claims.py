@@ -6,11 +6,13 @@ whole file costs one headless run per distinct setting."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
 
-from lab_modules.claims import WORKSHEET_MARKER, Claim, markdown_table, render_worksheet
+from app.cli import main
+from lab_modules.claims import PENDING, WORKSHEET_MARKER, Claim, markdown_table, render_worksheet
 from lab_modules.exercises import claim_run, measure_claims, registry
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -55,6 +57,7 @@ def test_worksheet_renders_its_table_from_the_claims(name):
     rendered = render_worksheet(text, table)
     assert WORKSHEET_MARKER not in rendered and table in rendered
     assert sum(line.startswith("| ") for line in table.splitlines()) == len(exercise.claims) + 1
+    assert table.count(PENDING) >= 2 * len(exercise.claims)          # lab value and status pending
 
 
 def test_claims_are_measured_once_per_run():
@@ -84,3 +87,30 @@ def test_a_failing_or_missing_claim_is_reported():
     with pytest.raises(KeyError):
         claim.value_in({"a": {}})
     assert "FAIL" in markdown_table((claim,), [2.5]) and "pass" in markdown_table((claim,), [1.5])
+
+
+def test_reproduce_prints_json_and_writes_the_report(tmp_path, capsys):
+    status = main(["reproduce", "--quick", "--json", "--exercise", "lqg_vs_pid", "--html", str(tmp_path)])
+    report = json.loads(capsys.readouterr().out)
+    assert status == 0
+    rows = report["claims"]
+    assert len(rows) == len(EXERCISES["lqg_vs_pid"].claims)
+    assert all(row["status"] in ("pass", "deviation (holds)") for row in rows)
+    page = (tmp_path / "index.html").read_text(encoding="utf-8")
+    assert page.count("data:image/png;base64,") >= 2 and rows[0]["quantity"] in page
+
+
+@pytest.mark.parametrize("argv", [["reproduce", "--exercise", "no_such_exercise"],
+                                  ["reproduce", "--exercise", "lqg_vs_pid", "--html", __file__]])
+def test_reproduce_bad_input_exits_2_with_one_line(argv, capsys):
+    assert main(argv) == 2
+    error = capsys.readouterr().err.strip()
+    assert error.startswith("error:") and "\n" not in error
+
+
+def test_reproduce_exits_1_when_a_claim_fails(monkeypatch, capsys):
+    exercise = EXERCISES["lqg_vs_pid"]
+    broken = exercise.claims[0].__class__(**{**exercise.claims[0].__dict__, "accept": (1e9, None)})
+    monkeypatch.setattr(type(exercise), "claims", (broken,))
+    assert main(["reproduce", "--quick", "--exercise", "lqg_vs_pid"]) == 1
+    assert "FAIL" in capsys.readouterr().out

@@ -167,9 +167,11 @@ CLAIMS = (
                "prediction error of the noise-matched filter); the lab's sensor lag T_mx and derivative "
                "filter τ, not in the paper, move this figure", duration_s=CLAIM_RUN_S),
     Claim("paper 000 §II", "true rotor displacement reduction near the measured loop's gain limit",
-          "about 80 %", "oscillation_reduction_percent", (60, None), "%", deviation=True,
-          note="at gain factor 1.3 the measured-feedback loop rings more, so the filter removes more; "
-               "still below the paper's figure, which describes the rig's signals",
+          "about 80 %", "predicted_oscillation_reduction_percent", (60, None), "%", deviation=True,
+          note="at gain factor 1.3 the measured-feedback loop rings more, so the filter removes more; still "
+               "below the paper's figure, which describes the rig's signals. Steady-state RMS of the linear "
+               "loop (Lyapunov): this lightly damped loop makes time runs of a few seconds scatter by a few "
+               "percent with the seed",
           settings={"gain_factor": 1.3}, duration_s=CLAIM_RUN_S),
     Claim("lab bound (paper 000 §II)", "share of the possible true-motion reduction the filter reaches",
           "—", "share_of_possible_reduction", (0.75, None), "",
@@ -317,6 +319,8 @@ class KalmanNoise(Exercise):
             "current_noise_reduction_percent": 100.0 * (1.0 - current["estimated"] / current["measured"]),
             "predicted_rms_displacement_measured_feedback_um": predicted["measured"] * 1e6,
             "predicted_rms_displacement_estimated_feedback_um": predicted["estimated"] * 1e6,
+            "predicted_oscillation_reduction_percent":
+                100.0 * (1.0 - predicted["estimated"] / predicted["measured"]),
             "rms_displacement_lower_bound_um": floor * 1e6,
             "max_possible_reduction_percent": 100.0 * (1.0 - floor / predicted["measured"]),
             # (x_meas - x_est) / (x_meas - lower bound), on the steady-state (Lyapunov) RMS values
