@@ -114,7 +114,7 @@ def markdown_table(claims: tuple[Claim, ...], values: list[float | None] | None 
     value (``…`` where ``values`` is None or has None: still being measured),
     then the claims' notes (how it is measured; a deviation's reason) as a list."""
     values = values if values is not None else [None] * len(claims)
-    rows = ["| source | quantity | paper | lab | accepted | status |", "|---|---|---|---|---|---|"]
+    rows = ["| source | claim | paper | lab | accepted | status |", "|---|---|---|---|---|---|"]
     for claim, value in zip(claims, values):
         lab = format_value(value) + (f" {claim.unit}" if value is not None and claim.unit else "")
         quantity = claim.quantity + (f" (at {settings_text(claim.settings)})" if claim.settings else "")
