@@ -48,6 +48,17 @@ def _parser() -> argparse.ArgumentParser:
     bench.add_argument("--seconds", type=float, default=2.0, help="simulated seconds per measurement")
     bench.add_argument("--browser", action="store_true",
                        help="instead: slider-to-readout latency in headless Chromium (needs the test extras)")
+    bench.add_argument("--clients", type=int, default=None, metavar="N",
+                       help="instead: N headless websocket tabs against a started server (scope updates/s, "
+                            "bytes/s, server CPU per tab; capacity)")
+    bench.add_argument("--workers", type=int, default=1, metavar="W",
+                       help="with --clients: lab processes behind HAProxy (default 1: one process, no HAProxy)")
+    bench.add_argument("--steps", type=int, default=4, help="with --clients: ramp up in this many steps")
+    bench.add_argument("--window", type=float, default=8.0, help="with --clients: seconds measured per step")
+    bench.add_argument("--bench-port", type=int, default=8109, help="with --clients: loopback port of the server")
+    bench.add_argument("--breakdown", action="store_true", help="with --clients: bytes by message kind")
+    bench.add_argument("--all-steps", action="store_true",
+                       help="with --clients: go on after a step below the target (default: stop there)")
     return parser
 
 
@@ -146,6 +157,10 @@ def main(argv: list[str] | None = None) -> int:
             from app.browser_bench import main as browser_bench_main
             with tempfile.TemporaryDirectory() as scratch:
                 return browser_bench_main(args.json, Path(scratch) / "server.log")
+        if args.command == "bench" and args.clients is not None:
+            from app.load_bench import main as load_bench_main
+            return load_bench_main(args.clients, args.workers, args.steps, args.window, args.exercise,
+                                   args.bench_port, args.breakdown, args.json, args.all_steps)
         if args.command == "bench":
             from app.bench import main as bench_main
             return bench_main(args.seconds, args.json)
