@@ -57,6 +57,9 @@ def _parser() -> argparse.ArgumentParser:
     bench.add_argument("--window", type=float, default=8.0, help="with --clients: seconds measured per step")
     bench.add_argument("--bench-port", type=int, default=8109, help="with --clients: loopback port of the server")
     bench.add_argument("--breakdown", action="store_true", help="with --clients: bytes by message kind")
+    bench.add_argument("--slider-every", type=int, default=3, metavar="K",
+                       help="with --clients: a tab moves a slider with every K-th camera message (every ~3 s); "
+                            "0: never (streaming cost only)")
     bench.add_argument("--all-steps", action="store_true",
                        help="with --clients: go on after a step below the target (default: stop there)")
     return parser
@@ -160,7 +163,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "bench" and args.clients is not None:
             from app.load_bench import main as load_bench_main
             return load_bench_main(args.clients, args.workers, args.steps, args.window, args.exercise,
-                                   args.bench_port, args.breakdown, args.json, args.all_steps)
+                                   args.bench_port, args.breakdown, args.json, args.all_steps,
+                                   args.slider_every)
         if args.command == "bench":
             from app.bench import main as bench_main
             return bench_main(args.seconds, args.json)

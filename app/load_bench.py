@@ -45,7 +45,8 @@ ROOT = Path(__file__).resolve().parent.parent
 PROTOCOL = f"viser-v{viser.__version__}"      # the subprotocol a viser client of this version offers
 MIN_UPDATES_PER_S = 20.0
 TARGET_BYTES_PER_S = 150e3
-INPUT_PERIOD_S = 4.0                          # each tab sends a camera message and a slider move this often
+CAMERA_PERIOD_S = 3.0                         # each tab sends a camera message this often ...
+SLIDER_EVERY = 3                              # ... and moves a slider with every third one (an analysis: ~0.1 s CPU)
 CONNECT_RATE_PER_S = 10.0                     # new tabs per second while ramping up
 SETTLE_S = 4.0                                # after the last new tab of a step, before measuring
 SLIDER_LABEL = "Position sensor noise"
@@ -87,6 +88,7 @@ class Tab:
     url: str
     titles: tuple[str, ...]                   # scope chart titles
     breakdown: bool = False
+    slider_every: int = SLIDER_EVERY           # 0: the tab never moves a slider
     received_bytes: int = 0
     scope_times: list[float] = field(default_factory=list)   # arrival of each update of the first scope chart
     kind_bytes: Counter = field(default_factory=Counter)
@@ -137,7 +139,7 @@ class Tab:
 
     async def _inputs(self, connection, stop: asyncio.Event) -> None:
         """A camera message at once and then, like a student, every few seconds a camera
-        message and a slider move."""
+        message, and every third time also a slider move."""
         turn = 0
         await asyncio.sleep(random.uniform(0.0, 0.2))
         while not stop.is_set():
@@ -147,13 +149,13 @@ class Tab:
                       "image_height": 768, "image_width": 386, "look_at": [0.0, 0.0, 0.0],
                       "up_direction": [0.0, 0.0, 1.0]}
             await connection.send(msgspec.msgpack.encode(camera))
-            if self.slider is not None and turn > 0:
+            if self.slider is not None and self.slider_every and turn % self.slider_every == self.slider_every - 1:
                 move = {"type": "GuiUpdateMessage", "uuid": self.slider,
-                        "updates": {"value": SLIDER_VALUES[turn % 2]}}
+                        "updates": {"value": SLIDER_VALUES[turn // self.slider_every % 2]}}
                 await connection.send(msgspec.msgpack.encode(move))
             turn += 1
             with contextlib.suppress(asyncio.TimeoutError):
-                await asyncio.wait_for(stop.wait(), INPUT_PERIOD_S * random.uniform(0.8, 1.2))
+                await asyncio.wait_for(stop.wait(), CAMERA_PERIOD_S * random.uniform(0.8, 1.2))
 
     async def run(self, stop: asyncio.Event) -> None:
         try:
@@ -242,9 +244,10 @@ def lab_server(port: int, workers: int, exercise: str, log: Path,
     if workers > 1:
         command += ["serve", "--workers", str(workers)]
     command += list(extra)
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    root = Path(os.environ.get("LAB_BENCH_ROOT", ROOT))   # another tree's lab, for before/after runs
+    env = {**os.environ, "PYTHONPATH": str(root)}
     with log.open("w") as out:
-        server = subprocess.Popen(command, cwd=ROOT, stdout=out, stderr=subprocess.STDOUT, env=env)
+        server = subprocess.Popen(command, cwd=root, stdout=out, stderr=subprocess.STDOUT, env=env)
         try:
             wait_http(f"http://127.0.0.1:{port}/", server, timeout_s, log)
             yield server
@@ -291,7 +294,7 @@ class Step:
 
 
 async def _measure(url: str, steps: list[int], window_s: float, server_pid: int, titles: tuple[str, ...],
-                   breakdown: bool, report, all_steps: bool) -> tuple[list[Step], list[Tab]]:
+                   breakdown: bool, report, all_steps: bool, slider_every: int) -> tuple[list[Step], list[Tab]]:
     stop = asyncio.Event()
     tabs: list[Tab] = []
     tasks: list[asyncio.Task] = []
@@ -299,7 +302,7 @@ async def _measure(url: str, steps: list[int], window_s: float, server_pid: int,
     try:
         for clients in steps:
             while len(tabs) < clients:
-                tab = Tab(url, titles, breakdown)
+                tab = Tab(url, titles, breakdown, slider_every)
                 tabs.append(tab)
                 tasks.append(asyncio.create_task(tab.run(stop)))
                 await asyncio.sleep(1.0 / CONNECT_RATE_PER_S)
@@ -334,7 +337,8 @@ def ramp(clients: int, steps: int) -> list[int]:
 
 
 def run(clients: int, workers: int, steps: int, window_s: float, exercise: str, port: int,
-        breakdown: bool, report=lambda step: None, all_steps: bool = False) -> dict:
+        breakdown: bool, report=lambda step: None, all_steps: bool = False,
+        slider_every: int = SLIDER_EVERY) -> dict:
     titles = scope_titles(exercise)
     with tempfile.TemporaryDirectory() as scratch:
         log = Path(scratch) / "server.log"
@@ -343,9 +347,11 @@ def run(clients: int, workers: int, steps: int, window_s: float, exercise: str, 
             extra = ("--worker-ports", str(port + 1))
         with lab_server(port, workers, exercise, log, extra) as server:
             results, tabs = asyncio.run(_measure(f"ws://127.0.0.1:{port}", ramp(clients, steps), window_s,
-                                                 server.pid, titles, breakdown, report, all_steps))
+                                                 server.pid, titles, breakdown, report, all_steps,
+                                                 slider_every))
     passing = [s.clients for s in results if s.ok]
     result = {"exercise": exercise, "workers": workers, "window_s": window_s,
+              "camera_period_s": CAMERA_PERIOD_S, "slider_move_period_s": CAMERA_PERIOD_S * slider_every or None,
               "machine_cores": os.cpu_count(), "load_average_1min": os.getloadavg()[0],
               "steps": [s.row() for s in results],
               "largest_clients_at_min_updates": max(passing, default=0),
@@ -363,7 +369,7 @@ def run(clients: int, workers: int, steps: int, window_s: float, exercise: str, 
 
 
 def main(clients: int, workers: int, steps: int, window_s: float, exercise: str, port: int,
-         breakdown: bool, as_json: bool, all_steps: bool = False) -> int:
+         breakdown: bool, as_json: bool, all_steps: bool = False, slider_every: int = SLIDER_EVERY) -> int:
     def report(step: Step) -> None:
         if not as_json:
             r = step.row()
@@ -375,10 +381,11 @@ def main(clients: int, workers: int, steps: int, window_s: float, exercise: str,
                   + ("" if step.ok else "  <- below target"), flush=True)
 
     if not as_json:
-        print(f"{exercise}: {workers} worker(s), up to {clients} headless tabs "
+        moves = f"a slider move every ~{CAMERA_PERIOD_S * slider_every:.0f} s" if slider_every else "no slider moves"
+        print(f"{exercise}: {workers} worker(s), up to {clients} headless tabs ({moves}) "
               f"(load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores at start)", flush=True)
     try:
-        result = run(clients, workers, steps, window_s, exercise, port, breakdown, report, all_steps)
+        result = run(clients, workers, steps, window_s, exercise, port, breakdown, report, all_steps, slider_every)
     except RuntimeError as error:
         print(f"error: {error}", file=sys.stderr)
         return 1
