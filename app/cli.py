@@ -1,9 +1,12 @@
 """Command line of the lab.
 
     python -m app [--host H] [--port P] [--exercise NAME]   start the browser lab (default)
+    python -m app serve --workers N [--host H] [--port P]   N lab processes behind HAProxy
+    python -m app haproxy-config --backend HOST:PORT ...    HAProxy configuration for several machines
     python -m app list [--json]                exercises and their parameters
     python -m app run NAME [--set N=V ...] [--duration S] [--seed N] [--data FILE] [--json]
     python -m app bench [--json] [--browser]   throughput benchmark; --browser: slider-to-readout latency
+    python -m app bench --clients N [--workers W]   headless tabs: scope updates/s, bytes/s, CPU; capacity
 
 Bad input (unknown exercise or parameter, non-numbers, NaN, out of range)
 exits with status 2 and one line naming the problem and the valid range.
@@ -31,7 +34,23 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--exercise", default="kalman_noise",
                         help="exercise a new tab opens on (default kalman_noise; tabs can switch)")
     sub = parser.add_subparsers(dest="command")
-    sub.add_parser("serve", help="start the browser lab (the default)")
+    serve = sub.add_parser("serve", help="start the browser lab (the default); --workers N: N processes "
+                                         "behind HAProxy")
+    serve.add_argument("--host", default=argparse.SUPPRESS, help="address to serve on (default 127.0.0.1)")
+    serve.add_argument("--port", type=int, default=argparse.SUPPRESS, help="port to serve on (default 8080)")
+    serve.add_argument("--exercise", default=argparse.SUPPRESS, help="exercise a new tab opens on")
+    serve.add_argument("--workers", type=int, default=None, metavar="N",
+                       help="lab processes behind HAProxy (default: one per core; 1: one process, no HAProxy)")
+    serve.add_argument("--worker-ports", type=int, default=None, metavar="FIRST",
+                       help="the workers' loopback ports: FIRST, FIRST+1, ... (default: --port + 1)")
+    balancer = sub.add_parser("haproxy-config", help="print an HAProxy configuration for lab processes "
+                                                     "on several machines")
+    balancer.add_argument("--backend", action="append", required=True, metavar="HOST:PORT",
+                          help="a lab process or a machine's 'serve --workers' address (repeatable)")
+    balancer.add_argument("--host", dest="bind_host", default="0.0.0.0",
+                          help="address the balancer listens on (default 0.0.0.0)")
+    balancer.add_argument("--port", dest="bind_port", type=int, default=8080,
+                          help="port the balancer listens on (default 8080)")
     listing = sub.add_parser("list", help="list exercises and their parameters")
     listing.add_argument("--json", action="store_true", help="print JSON")
     run = sub.add_parser("run", help="run one exercise headless and print its metrics")
@@ -160,6 +179,20 @@ def main(argv: list[str] | None = None) -> int:
             from app.browser_bench import main as browser_bench_main
             with tempfile.TemporaryDirectory() as scratch:
                 return browser_bench_main(args.json, Path(scratch) / "server.log")
+        if args.command == "haproxy-config":
+            from app.hall import check_port, haproxy_config, parse_backend
+            backends = [parse_backend(b) for b in args.backend]
+            print(haproxy_config(args.bind_host, check_port(args.bind_port), backends,
+                                 note="\n# Start the lab on every backend with the same --token; "
+                                      "run: haproxy -f THIS_FILE"), end="")
+            return 0
+        if args.command == "serve" and (args.workers is None or args.workers != 1):
+            from app.hall import check_port, check_workers, serve_hall
+            get(args.exercise)
+            workers = check_workers(args.workers)
+            if workers > 1:
+                return serve_hall(args.host, check_port(args.port), workers, args.exercise,
+                                  args.worker_ports, forwarded=[])
         if args.command == "bench" and args.clients is not None:
             from app.load_bench import main as load_bench_main
             return load_bench_main(args.clients, args.workers, args.steps, args.window, args.exercise,
