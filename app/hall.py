@@ -152,9 +152,19 @@ class Worker:
         return f"http://127.0.0.1:{self.port}/"
 
 
-def worker_command(port: int, exercise: str, forwarded: list[str]) -> list[str]:
-    return [sys.executable, "-m", "app", "--host", "127.0.0.1", "--port", str(port),
-            "--exercise", exercise, *forwarded]
+def worker_command(port: int, settings, allow_origins: list[str]) -> list[str]:
+    """A worker: the single-process lab on a loopback port with the hall's settings.  The class
+    token is passed on explicitly: a worker on loopback would otherwise ask none, and every tab
+    reaches it through HAProxy from the network."""
+    command = [sys.executable, "-m", "app", "--host", "127.0.0.1", "--port", str(port),
+               "--exercise", settings.exercise]
+    if settings.token is not None:
+        command += ["--token", settings.token]
+    if settings.data_dir is not None:                 # one saved-experiments database for all workers
+        command += ["--data-dir", str(settings.data_dir)]
+    for origin in allow_origins:
+        command += ["--allow-origin", origin]
+    return command
 
 
 def _ready(url: str) -> bool:
@@ -189,13 +199,16 @@ def _raise_stop(signum, _frame) -> None:
     raise _Stop(signal.Signals(signum).name)
 
 
-def serve_hall(host: str, port: int, workers: int, exercise: str, first_worker_port: int | None,
-               forwarded: list[str]) -> int:
-    """Serve the lab with ``workers`` processes behind HAProxy until Ctrl-C or SIGTERM."""
+def serve_hall(settings, workers: int, first_worker_port: int | None, allow_origins: list[str]) -> int:
+    """Serve the lab (``settings``: ``app.server.Settings``) with ``workers`` processes behind
+    HAProxy until Ctrl-C or SIGTERM."""
+    from app.access import check_bindable
+    from app.server import shown_url
     haproxy = shutil.which("haproxy")
     if haproxy is None:
         print(f"error: {HAPROXY_MISSING}", file=sys.stderr)
         return 1
+    host, port = settings.host, settings.port
     first = first_worker_port if first_worker_port is not None else port + 1
     ports = [first + k for k in range(workers)]
     if ports[-1] > 65535:
@@ -203,13 +216,12 @@ def serve_hall(host: str, port: int, workers: int, exercise: str, first_worker_p
     if port in ports:
         raise ParameterError(f"--worker-ports={first} overlaps --port={port}: the workers need "
                              f"{workers} free ports apart from it")
+    check_bindable(host, port)
     busy = [p for p in ports if not port_free(p)]
-    if not port_free(port, host):
-        busy.insert(0, port)
     if busy:
-        raise ParameterError(f"port(s) {', '.join(map(str, busy))} already in use: choose another "
-                             "--port or --worker-ports")
-    pool = [Worker(k + 1, p, worker_command(p, exercise, forwarded)) for k, p in enumerate(ports)]
+        raise ParameterError(f"worker port(s) {', '.join(map(str, busy))} already in use: choose others "
+                             "with --worker-ports FIRST")
+    pool = [Worker(k + 1, p, worker_command(p, settings, allow_origins)) for k, p in enumerate(ports)]
     previous = {s: signal.signal(s, _raise_stop) for s in (signal.SIGINT, signal.SIGTERM)}
     proxy: subprocess.Popen | None = None
     with tempfile.TemporaryDirectory(prefix="amb-lab-hall-") as scratch:
@@ -232,8 +244,11 @@ def serve_hall(host: str, port: int, workers: int, exercise: str, first_worker_p
             if proxy.poll() is not None:
                 print(f"error: HAProxy did not start (exit status {proxy.returncode})", file=sys.stderr)
                 return 1
-            print(f"AMB estimation lab: open http://{host}:{port} in a browser "
+            print(f"AMB estimation lab: open {shown_url(host, port)} in a browser "
                   f"({workers} lab processes behind HAProxy; Ctrl+C to stop)", flush=True)
+            if settings.token is not None:
+                how = "generated; set your own with --token" if settings.token_generated else "from --token"
+                print(f"Class token: {settings.token} ({how}); every new tab asks for it", flush=True)
             while True:
                 time.sleep(POLL_S)
                 if proxy.poll() is not None:

@@ -5,20 +5,31 @@ exercise's parameters, charts, analysis and optional 3D scene, runs the
 simulation on its own thread (the compiled loops release the GIL, so tabs run
 in parallel) and stops everything when the tab closes.  The exercise chooser
 at the top swaps the whole lab for another exercise.
+
+Everything a tab asks for runs on the tab's own *worker* thread, one event at
+a time: the GUI callbacks only record which control changed (newest value
+wins, so a burst of updates costs one), which serialises exercise switches
+and keeps one busy tab from occupying threads the others need.  A tab closed
+while its lab is still being built stops building and starts no threads.
 """
 
 from __future__ import annotations
 
 import itertools
+import re
+import sys
 import threading
 import time
 import traceback
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
 import viser
 
+from app.access import token_matches
+from app.store import Store, StoreError
+from app.traffic import callback
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, registry
 from lab_modules.parameters import Parameter, ParameterError
 from lab_modules.scenes.bearing import CANVAS_PX
@@ -45,6 +56,21 @@ SETTLE_BEFORE_REMOVAL_S = 0.3     # an exercise switch waits this long between t
 LOG_SCALE = {"distr": 3, "log": 10}   # uPlot's logarithmic scale
 LOG_DECADES = 4                   # a logarithmic plot shows at most this many decades
 LIGHT_DAMPING = 0.3               # poles below this damping always belong to the dominant view
+AUTOSAVE_AFTER_S = 1.0            # a tab's autosave is written this long after its last change
+TOKEN_ATTEMPTS = 5                # wrong class tokens before a tab is disconnected
+TOKEN_RETRY_S = 1.0               # a wrong token waits this long before the next try
+
+
+class _Closed(Exception):
+    """The tab closed while its lab was being built."""
+
+
+def escaped(text) -> str:
+    """Text shown in a Markdown element as typed (file names, error messages): Markdown's
+    special characters backslash-escaped, then &, < and > as HTML entities (viser's
+    Markdown renders raw HTML)."""
+    text = re.sub(r"([\\`*_{}\[\]()#+\-.!|~])", r"\\\1", str(text))
+    return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
 
 
 def _format(value: float) -> str:
@@ -67,49 +93,161 @@ class LabSession:
     starts a new one, and the simulation thread and analyses of an older
     generation stop writing to the tab (its GUI handles are gone)."""
 
-    def __init__(self, client: viser.ClientHandle, exercise: Exercise):
+    def __init__(self, client: viser.ClientHandle, exercise: Exercise, store: Store | None = None,
+                 token: str | None = None, on_refused: Callable[[str], None] | None = None):
+        """Cheap: the lab is built on the tab's worker thread (after the class token, if one is set)."""
         self.client = client
         self.exercises = registry()
+        self.store = store
+        self.token = token
+        self.on_refused = on_refused or (lambda _reason: None)   # disconnects the tab (too many wrong tokens)
         self.lock = threading.Lock()                  # values, simulation, buffer, running
         self.gui_lock = threading.RLock()             # writes to the GUI handles; held while the GUI is rebuilt
         self.generations = itertools.count()
         self.generation = next(self.generations)
         self.closed = False
+        self.exercise: Exercise | None = None
         self.scene_refresh = next(iter(SCENE_REFRESH))   # this tab's choice, kept across exercises
         self.worksheet_beside = False                     # likewise
         self.scene_quiet_until = 0.0                      # perf_counter time before which the 3D view waits
         self.thread: threading.Thread | None = None
+        self.analysis_thread: threading.Thread | None = None
         self.analysis_request: tuple[int, Exercise, dict] | None = None
         self.analysis_wakeup = threading.Condition()
-        client.gui.configure_theme(dark_mode=False, show_logo=False, control_width="large")
-        client.scene.configure_default_lights(cast_shadow=False)   # shadow passes made every scene update costly
-        client.scene.configure_environment_map(hdri=None)
-        self._start(exercise)
-        threading.Thread(target=self._analysis_worker, name=f"analysis-{client.client_id}", daemon=True).start()
+        self.events: dict[object, Callable[[], None]] = {}   # control -> what to do (newest wins)
+        self.wakeup = threading.Condition()
+        self.autosave_code: str | None = None
+        self.autosave_due: float | None = None               # perf_counter time of the next autosave
+        self.recording: tuple[str, bytes] | None = None      # the uploaded file, as it came
+        self.problems: set[str] = set()                       # simulation-thread errors already shown
+        self.token_attempts = 0
+        self.worker = threading.Thread(target=self._work, args=(exercise,), name=f"tab-{client.client_id}",
+                                       daemon=True)
+        self.worker.start()
+
+    # -- the tab's worker: every event, in order, newest value per control ----------------
+    def post(self, key, action: Callable[[], None]) -> None:
+        """Queue ``action`` for the worker; it replaces a queued action of the same ``key``
+        (safe from any thread, including viser's event loop)."""
+        with self.wakeup:
+            if self.closed:
+                return
+            self.events.pop(key, None)
+            self.events[key] = action
+            self.wakeup.notify()
+
+    def _on(self, key, action: Callable[[], None]):
+        """A GUI callback that queues ``action`` under ``key`` (runs on the event loop, returns at once)."""
+        return callback(lambda _event: self.post(key, action))
+
+    def _work(self, exercise: Exercise) -> None:
+        try:
+            with self.gui_lock:
+                self._check_open()
+                self.client.gui.configure_theme(dark_mode=False, show_logo=False, control_width="large")
+                # shadow passes made every scene update costly
+                self.client.scene.configure_default_lights(cast_shadow=False)
+                self.client.scene.configure_environment_map(hdri=None)
+                if self.token is None:
+                    self._start(exercise)
+                else:
+                    self._ask_token(exercise)
+            while True:
+                with self.wakeup:
+                    while not self.events and not self.closed and not self._autosave_now():
+                        timeout = None if self.autosave_due is None else \
+                            max(self.autosave_due - time.perf_counter(), 0.0)
+                        self.wakeup.wait(timeout)
+                    if self.closed:
+                        break
+                    events, self.events = list(self.events.values()), {}
+                for action in events:
+                    self._do(action)
+                if self._autosave_now():
+                    self._autosave()
+        except _Closed:
+            pass
+        finally:
+            self.close()
+            if self.autosave_due is not None:
+                self._autosave()                          # the last changes of a closed tab
+
+    def _do(self, action: Callable[[], None]) -> None:
+        """Run one event; an error is shown in the tab (one line), never ends the worker."""
+        try:
+            action()
+        except _Closed:
+            raise
+        except Exception as error:  # noqa: BLE001 - any failure of one event is shown, the tab goes on
+            traceback.print_exc()
+            self._show_error(f"⚠️ That did not work: {escaped(error)}")
+
+    def _check_open(self) -> None:
+        if self.closed:
+            raise _Closed
+
+    # -- class token -------------------------------------------------------------------
+    def _ask_token(self, exercise: Exercise) -> None:
+        """One field asking for the class token; nothing of the lab is built before it is right."""
+        gui = self.client.gui
+        gui.add_markdown("### AMB estimation lab\nEnter the class token your instructor gave you.")
+        field = gui.add_text("Class token", "", hint="The token shown by the lab's server at start.")
+        enter = gui.add_button("Enter the lab")
+        message = gui.add_markdown("")
+
+        def check() -> None:
+            if token_matches(self.token, field.value):
+                with self.gui_lock:
+                    self.client.gui.reset()
+                    self._start(exercise)
+                return
+            self.token_attempts += 1
+            if self.token_attempts >= TOKEN_ATTEMPTS:
+                self.on_refused("too many wrong class tokens")
+                raise _Closed
+            time.sleep(TOKEN_RETRY_S)                     # guessing costs time; other tabs are not held up
+            message.content = f"⚠️ That is not the class token ({TOKEN_ATTEMPTS - self.token_attempts} tries left)."
+        field.on_update(self._on("token", check))
+        enter.on_click(self._on("token", check))
 
     # -- life cycle ------------------------------------------------------------------
-    def _start(self, exercise: Exercise) -> None:
-        values = exercise.resolve({})
+    def _start(self, exercise: Exercise, overrides: dict | None = None,
+               recording: tuple[str, bytes] | None = None) -> None:
+        """Show ``exercise`` (call holding ``gui_lock``): at ``overrides`` and with ``recording``
+        (a saved experiment), else on its defaults."""
+        self._check_open()
+        data = exercise.load_data(*recording) if recording else None
+        values = exercise.resolve({**(overrides or {}), "data": data})
         simulation = exercise.simulation(values)
         with self.lock:
             self.exercise, self.values, self.simulation, self.running = exercise, values, simulation, True
             self.columns = {name: 1 + i for i, name in enumerate(simulation.columns)}
             self.buffer = np.empty((0, 1 + len(self.columns)))
+        self.recording = recording
         self.shown_poles: dict[str, np.ndarray] | None = None
         self.shown_analysis: Analysis | None = None   # the last analysis shown, redrawn with fresh scope readouts
         self.scene = exercise.scene(self.values)
         self._build_gui()
+        self._check_open()
         if self.scene is not None:
             self.scene.attach(self.client.scene)
+        self._check_open()
         self._request_analysis()
+        if self.analysis_thread is None:
+            self.analysis_thread = threading.Thread(target=self._analysis_worker,
+                                                    name=f"analysis-{self.client.client_id}", daemon=True)
+            self.analysis_thread.start()
+        self._start_simulation_thread()
+        self._changed()
+
+    def _start_simulation_thread(self) -> None:
         self.thread = threading.Thread(target=self._run, args=(self.generation,),
                                        name=f"lab-{self.client.client_id}", daemon=True)
         self.thread.start()
 
-    def _switch(self, title: str) -> None:
-        chosen = next(e for e in self.exercises.values() if e.title == title)
-        if chosen is self.exercise:
-            return
+    def _switch(self, exercise: Exercise, overrides: dict | None = None,
+                recording: tuple[str, bytes] | None = None) -> None:
+        """Replace the tab's lab (on the worker, so switches never overlap)."""
         with self.gui_lock:
             self.generation = next(self.generations)  # the old thread and analyses stop writing
         if self.thread is not None:
@@ -119,20 +257,87 @@ class LabSession:
         self.client.flush()
         time.sleep(SETTLE_BEFORE_REMOVAL_S)
         with self.gui_lock:
+            self._check_open()
             self.client.gui.reset()
             self.client.scene.reset()
-            self._start(chosen)
+            self._start(exercise, overrides, recording)
+
+    def _choose(self, title: str) -> None:
+        chosen = next(e for e in self.exercises.values() if e.title == title)
+        if chosen is not self.exercise:
+            self._switch(chosen)
 
     def _current(self, generation: int) -> bool:
         """Whether ``generation`` still owns the tab's GUI (call holding ``gui_lock``)."""
         return generation == self.generation and not self.closed
 
     def close(self) -> None:
-        """Stop the simulation and analysis threads; the tab is gone."""
-        with self.gui_lock:
-            self.closed = True
+        """Stop the worker, simulation and analysis threads; the tab is gone (idempotent, any thread)."""
+        self.closed = True
+        with self.wakeup:
+            self.events.clear()
+            self.wakeup.notify()
         with self.analysis_wakeup:
             self.analysis_wakeup.notify()
+
+    def report(self, text: str) -> None:
+        """A one-line message for the tab from outside (e.g. a message the server refused)."""
+        self.post(("report", text), lambda: self._show_error(f"⚠️ {escaped(text)}"))
+
+    def _show_error(self, markdown: str) -> None:
+        with self.gui_lock:
+            if self.exercise is not None and not self.closed and hasattr(self, "error"):
+                self.error.content = markdown
+
+    # -- saved experiments --------------------------------------------------------------
+    def _changed(self) -> None:
+        """Something worth keeping changed: autosave after ``AUTOSAVE_AFTER_S`` of quiet."""
+        if self.store is not None:
+            self.autosave_due = time.perf_counter() + AUTOSAVE_AFTER_S
+
+    def _autosave_now(self) -> bool:
+        return self.autosave_due is not None and time.perf_counter() >= self.autosave_due
+
+    def _snapshot(self) -> tuple[str, dict, str | None, bytes | None]:
+        with self.lock:
+            values = {k: v for k, v in self.values.items() if k != "data"}
+        name, content = self.recording or (None, None)
+        return self.exercise.name, values, name, content
+
+    def _autosave(self) -> None:
+        self.autosave_due = None
+        if self.store is None or self.exercise is None:
+            return
+        try:
+            if self.autosave_code is None:
+                self.autosave_code = self.store.new_autosave(*self._snapshot())
+                self._show_codes()
+            else:
+                self.store.autosave(self.autosave_code, *self._snapshot())
+        except (StoreError, OSError, ValueError) as error:   # sqlite3.Error is not a ValueError: see store
+            print(f"autosave failed: {error}", file=sys.stderr, flush=True)
+
+    def _save(self) -> None:
+        code = self.store.save(*self._snapshot())
+        self.saved_note.content = (f"Saved as **{code}**: type it under *Experiment code* in any tab "
+                                   "(also after a restart) and press *Open*.")
+
+    def _open(self, text: str) -> None:
+        try:
+            saved = self.store.load(text)
+            exercise = self.exercises[saved.exercise]
+        except (StoreError, KeyError) as error:
+            self.saved_note.content = f"⚠️ {escaped(error)}"
+            return
+        recording = (saved.recording_name, saved.recording) if saved.recording is not None else None
+        self._switch(exercise, saved.parameters, recording)
+        self.saved_note.content = f"Opened **{saved.code}**."
+
+    def _show_codes(self) -> None:
+        with self.gui_lock:
+            if self.autosave_code is not None and hasattr(self, "autosave_note") and not self.closed:
+                self.autosave_note.content = (f"This tab is autosaved as **{self.autosave_code}**: "
+                                              "after a reload, open that code.")
 
     # -- GUI ---------------------------------------------------------------------
     def _build_gui(self) -> None:
@@ -140,25 +345,25 @@ class LabSession:
         titles = tuple(e.title for e in self.exercises.values())
         chooser = gui.add_dropdown("Exercise", titles, initial_value=self.exercise.title,
                                    hint="Switch this tab to another exercise (starts it on its defaults).")
-        chooser.on_update(lambda _event: self._switch(chooser.value))
+        chooser.on_update(self._on("exercise", lambda: self._choose(chooser.value)))
         gui.add_markdown(f"### {self.exercise.title}")
         self.status = gui.add_markdown("**Running**")
         buttons = gui.add_button_group("Simulation", ("Run", "Pause", "Reset"))
-        buttons.on_click(lambda event: self._on_button(event.target.value))
+        buttons.on_click(self._on("buttons", lambda: self._on_button(buttons.value)))
         if self.scene is not None:
             refresh = gui.add_dropdown("3D view", tuple(SCENE_REFRESH), initial_value=self.scene_refresh,
                                        hint="How often the 3D view follows the simulation. Smooth motion needs "
                                             "a graphics card; without one it slows the whole page.")
-            refresh.on_update(lambda _event: setattr(self, "scene_refresh", refresh.value))
+            refresh.on_update(self._on("3D view", lambda: setattr(self, "scene_refresh", refresh.value)))
         toggle = gui.add_checkbox("Worksheet beside the charts", self.worksheet_beside,
                                   hint="Show the worksheet in place of the 3D view, next to the scope.")
         if self.exercise.data_description:
             upload = gui.add_upload_button("Load recording (CSV)", icon=viser.Icon.UPLOAD, mime_type=".csv,text/csv",
                                            hint=self.exercise.data_description)
-            upload.on_upload(lambda _event: self._on_upload(upload.value))
+            upload.on_upload(self._on("upload", lambda: self._on_upload(upload.value)))
         if self.exercise.download_label:
             download = gui.add_button(self.exercise.download_label, icon=viser.Icon.DOWNLOAD)
-            download.on_click(lambda _event: self._on_download())
+            download.on_click(self._on("download", self._on_download))
         self.inputs: dict[str, viser.GuiInputHandle] = {}
         groups: dict[str, list[Parameter]] = {}
         for parameter in self.exercise.parameters:
@@ -168,6 +373,16 @@ class LabSession:
                 for parameter in parameters:
                     self.inputs[parameter.name] = self._add_input(parameter)
         self.error = gui.add_markdown("")
+        if self.store is not None:
+            with gui.add_folder("Saved experiment", expand_by_default=False):
+                self.autosave_note = gui.add_markdown("")
+                code = gui.add_text("Experiment code", "", hint="A code such as KN-7Q3M from Save (any tab, "
+                                                                 "any day) or from your instructor.")
+                actions = gui.add_button_group("Experiment", ("Save", "Open"))
+                actions.on_click(self._on("experiment", lambda: self._save() if actions.value == "Save"
+                                          else self._open(code.value)))
+                self.saved_note = gui.add_markdown("")
+            self._show_codes()
 
         first = next(_analyses(self.exercise.analyse(dict(self.values))))
         self.panel = panel = gui.add_panel()
@@ -204,7 +419,7 @@ class LabSession:
 
         def show_beside(_event) -> None:
             self.worksheet_beside = beside.visible = toggle.value
-        toggle.on_update(show_beside)
+        toggle.on_update(self._on("beside", lambda: show_beside(None)))
 
     def _add_input(self, parameter: Parameter):
         gui, value = self.client.gui, self.values[parameter.name]
@@ -223,7 +438,7 @@ class LabSession:
             handle = gui.add_slider(label, parameter.minimum, parameter.maximum,
                                     step=parameter.step or (parameter.maximum - parameter.minimum) / 1000,
                                     initial_value=float(value), hint=parameter.description)
-        handle.on_update(lambda _event, p=parameter, h=handle: self._on_input(p, h.value))
+        handle.on_update(self._on(("input", parameter.name), lambda p=parameter, h=handle: self._on_input(p, h.value)))
         return handle
 
     def _add_chart(self, chart: Chart):
@@ -245,12 +460,13 @@ class LabSession:
         try:
             value = parameter.parse(value)
         except ParameterError as error:
-            self.error.content = f"⚠️ {error}"
+            self.error.content = f"⚠️ {escaped(error)}"
             return
         self.error.content = ""
         self.scene_quiet_until = time.perf_counter() + SCENE_QUIET_AFTER_INPUT_S
         with self.lock:
             self.values[parameter.name] = value
+        self._changed()
         if parameter.name == "time_scale":
             return
         self._request_analysis()                      # readouts first: they are what the student watches
@@ -260,19 +476,24 @@ class LabSession:
             else:
                 self.simulation = self.exercise.retune(self.simulation, self.values)
         if self.scene is not None:
-            self.scene.update(dict(self.values))
+            try:
+                self.scene.update(dict(self.values))
+            except Exception as error:  # noqa: BLE001 - the 3D view is not worth the lab
+                self._problem("3D view", error)
 
     def _on_upload(self, uploaded) -> None:
         try:
             data = self.exercise.load_data(uploaded.name, uploaded.content)
         except ParameterError as error:
             named = str(error) if uploaded.name in str(error) else f"{uploaded.name}: {error}"
-            self.error.content = f"⚠️ {named}"
+            self.error.content = f"⚠️ {escaped(named)}"
             return
-        self.error.content = f"Loaded {uploaded.name}."
+        self.error.content = f"Loaded {escaped(uploaded.name)}."
         with self.lock:
             self.values["data"] = data
             self._reset()
+        self.recording = (uploaded.name, uploaded.content)
+        self._changed()
         self._request_analysis()
 
     def _on_download(self) -> None:
@@ -288,7 +509,11 @@ class LabSession:
             if which == "Reset" or which == "Run" and self.simulation.status_message():
                 self._reset()
             self.running = which != "Pause"
-        self.status.content = "**Running**" if self.running else "**Paused**"
+        with self.gui_lock:
+            if which != "Pause" and (self.thread is None or not self.thread.is_alive()) and not self.closed:
+                self._start_simulation_thread()       # never left without a simulation
+            self.problems.clear()
+            self.status.content = "**Running**" if self.running else "**Paused**"
 
     def _reset(self) -> None:
         self.simulation = self.exercise.simulation(self.values)
@@ -359,7 +584,19 @@ class LabSession:
                 self.readouts.content = readouts
 
     # -- simulation thread -------------------------------------------------------------
+    def _problem(self, where: str, error: Exception) -> None:
+        """An error of the simulation thread or the 3D view: shown once in the tab, logged once."""
+        text = f"{where}: {type(error).__name__}: {error}"
+        if text in self.problems:
+            return
+        self.problems.add(text)
+        traceback.print_exception(error)
+        with self.gui_lock:
+            if not self.closed and hasattr(self, "error"):
+                self.error.content = f"⚠️ {escaped(text)} (the simulation goes on)"
+
     def _run(self, generation: int) -> None:
+        """The simulation thread: an error in one frame is reported and the next frame goes on."""
         carry, last, next_scene, next_readouts = 0.0, time.perf_counter(), 0.0, 0.0
         T = self.simulation.sample_time_s
         next_frame = last
@@ -374,34 +611,49 @@ class LabSession:
                 return
             now = time.perf_counter()
             elapsed, last = now - last, now
-            period = SCENE_REFRESH[self.scene_refresh]
-            if self.scene is not None and period is not None and now >= max(next_scene, self.scene_quiet_until):
-                self.scene.animate(now, self._latest())
-                next_scene = now + period
-            with self.lock:
-                if not self.running:
-                    continue
-                time_scale = self.values.get("time_scale", 1.0)
-                carry += time_scale * elapsed / T
-                steps, carry = int(carry), carry - int(carry)
-                trace = self.simulation.advance(steps)
-                window = min(max(int(SCOPE_WINDOW_S * max(time_scale / 0.01, 1.0) / T), 2), SCOPE_ROWS)
-                self.buffer = np.concatenate([self.buffer, trace])[-window:]
-                message = self.simulation.status_message()
-                if message:
-                    self.running = False
-                    stopped = self.simulation
-            with self.gui_lock:
-                if not self._current(generation):
-                    return
-                self._draw()
-                if now >= next_readouts:
-                    self._refresh_live_readouts()
-                    next_readouts = now + LIVE_READOUT_PERIOD_S
-                if message and self.simulation is stopped and not self.running:   # not reset meanwhile
-                    self.status.content = f"**Stopped: {message}** Press Run or Reset to start again."
-                    self.client.add_notification("Simulation stopped", message, color="red",
-                                                 auto_close_seconds=10.0)
+            try:
+                carry, next_scene, next_readouts = self._frame(generation, now, elapsed, T, carry,
+                                                               next_scene, next_readouts)
+            except Exception as error:  # noqa: BLE001 - reported; the next frame goes on
+                self._problem("simulation", error)
+
+    def _frame(self, generation: int, now: float, elapsed: float, T: float, carry: float,
+               next_scene: float, next_readouts: float) -> tuple[float, float, float]:
+        """One display frame: advance, draw, 3D view; returns the carried state."""
+        period = SCENE_REFRESH[self.scene_refresh]
+        if self.scene is not None and period is not None and now >= max(next_scene, self.scene_quiet_until):
+            next_scene = now + period
+            with self.gui_lock:                   # the scene belongs to this generation only
+                if self._current(generation):
+                    try:
+                        self.scene.animate(now, self._latest())
+                    except Exception as error:  # noqa: BLE001 - the 3D view is not worth the simulation
+                        self._problem("3D view", error)
+        with self.lock:
+            if not self.running:
+                return carry, next_scene, next_readouts
+            time_scale = self.values.get("time_scale", 1.0)
+            carry += time_scale * elapsed / T
+            steps, carry = int(carry), carry - int(carry)
+            trace = self.simulation.advance(steps)
+            window = min(max(int(SCOPE_WINDOW_S * max(time_scale / 0.01, 1.0) / T), 2), SCOPE_ROWS)
+            self.buffer = np.concatenate([self.buffer, trace])[-window:]
+            message = self.simulation.status_message()
+            if message:
+                self.running = False
+                stopped = self.simulation
+        with self.gui_lock:
+            if not self._current(generation):
+                return carry, next_scene, next_readouts
+            self._draw()
+            if now >= next_readouts:
+                self._refresh_live_readouts()
+                next_readouts = now + LIVE_READOUT_PERIOD_S
+            if message and self.simulation is stopped and not self.running:   # not reset meanwhile
+                self.status.content = f"**Stopped: {message}** Press Run or Reset to start again."
+                self.client.add_notification("Simulation stopped", message, color="red",
+                                             auto_close_seconds=10.0)
+        return carry, next_scene, next_readouts
 
     def _latest(self) -> dict[str, float]:
         """The newest sample of the scope buffer by column name (empty before the first)."""
