@@ -105,7 +105,8 @@ def _parser() -> argparse.ArgumentParser:
                        help="with --clients: lab processes behind HAProxy (default 1: one process, no HAProxy)")
     bench.add_argument("--steps", type=int, default=4, help="with --clients: ramp up in this many steps")
     bench.add_argument("--window", type=float, default=8.0, help="with --clients: seconds measured per step")
-    bench.add_argument("--bench-port", type=int, default=8109, help="with --clients: loopback port of the server")
+    bench.add_argument("--bench-port", type=int, default=8140,
+                       help="with --clients: loopback port of the server (workers: the next ports)")
     bench.add_argument("--breakdown", action="store_true", help="with --clients: bytes by message kind")
     bench.add_argument("--slider-every", type=int, default=3, metavar="K",
                        help="with --clients: a tab moves a slider with every K-th camera message (every ~3 s); "
