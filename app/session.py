@@ -672,21 +672,25 @@ class LabSession:
             return
         self.drawn_until = buffer[-1, 0]
         sample_time = self.simulation.sample_time_s
-        for chart, handle in zip(self.exercise.charts, self.charts):
-            columns = [self.columns[s.column] for s in chart.series]
-            rows = buffer[_scope_rows(buffer, columns, sample_time)]
-            t_ms = rows[:, 0] * 1e3
-            ys = []
-            if chart.band:
-                centre, sigma = rows[:, self.columns[chart.band[0]]], rows[:, self.columns[chart.band[1]]]
-                scale = chart.series[0].scale
-                ys += [(centre + 3 * sigma) * scale, (centre - 3 * sigma) * scale]
-            ys += [rows[:, column] * s.scale for s, column in zip(chart.series, columns)]
-            x = t_ms.astype(np.float32) if _float32_resolves(t_ms, sample_time * 1e3) else t_ms
-            data = (x, *(y.astype(np.float32) for y in ys))
-            # Straight to the wire: the handle's ``data`` setter would cast every column to float64.
-            handle._impl.props.data = data
-            handle._queue_update("data", data)
+        with self.client.atomic():                    # one wake-up of the event loop per frame, not per chart
+            for chart, handle in zip(self.exercise.charts, self.charts):
+                self._draw_chart(chart, handle, buffer, sample_time)
+
+    def _draw_chart(self, chart: Chart, handle, buffer: np.ndarray, sample_time: float) -> None:
+        columns = [self.columns[s.column] for s in chart.series]
+        rows = buffer[_scope_rows(buffer, columns, sample_time)]
+        t_ms = rows[:, 0] * 1e3
+        ys = []
+        if chart.band:
+            centre, sigma = rows[:, self.columns[chart.band[0]]], rows[:, self.columns[chart.band[1]]]
+            scale = chart.series[0].scale
+            ys += [(centre + 3 * sigma) * scale, (centre - 3 * sigma) * scale]
+        ys += [rows[:, column] * s.scale for s, column in zip(chart.series, columns)]
+        x = t_ms.astype(np.float32) if _float32_resolves(t_ms, sample_time * 1e3) else t_ms
+        data = (x, *(y.astype(np.float32) for y in ys))
+        # Straight to the wire: the handle's ``data`` setter would cast every column to float64.
+        handle._impl.props.data = data
+        handle._queue_update("data", data)
 
 
 def _scope_rows(buffer: np.ndarray, columns: list[int], sample_time_s: float,
