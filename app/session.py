@@ -36,7 +36,6 @@ from lab_modules.scenes.bearing import CANVAS_PX
 
 STATIC = Path(__file__).resolve().parent.parent / "static"
 FRAME_S = 1 / 25                  # display refresh
-MIN_FRAME_SLEEP_S = FRAME_S / 8   # a frame thread behind its clock still sleeps this long
 #: 3D view refresh periods [s] (None: still).  Every scene change makes the viser client
 #: render for 250 ms, so anything faster than 4/s renders non-stop: fine on a GPU, but in
 #: software WebGL it starves the page (slider-to-readout latency 0.6 s instead of 0.15 s).
@@ -604,9 +603,10 @@ class LabSession:
         while self._current(generation):
             next_frame += FRAME_S                     # a steady frame rate: the frame's own work is not added
             delay = next_frame - time.perf_counter()
-            if delay < -FRAME_S:                      # a frame or more behind (a busy server): drop the missed
-                next_frame -= delay                   # frames instead of bursting to catch up
-            time.sleep(max(delay, MIN_FRAME_SLEEP_S))  # behind or not, leave the other tabs a turn
+            if delay > 0:
+                time.sleep(delay)
+            else:
+                next_frame = time.perf_counter()      # behind (a busy server): no burst of frames to catch up
             if not self._current(generation):         # the tab closed or switched during the sleep
                 return
             now = time.perf_counter()
