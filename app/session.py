@@ -61,6 +61,30 @@ TOKEN_ATTEMPTS = 5                # wrong class tokens before a tab is disconnec
 TOKEN_RETRY_S = 1.0               # a wrong token waits this long before the next try
 
 
+#: One tab's worker and analyses together may use this share of a core on average, after a
+#: burst of ``TAB_CPU_BURST_S`` of CPU time: a tab that asks for more (a flood of slider
+#: updates) waits, with its requests coalescing, and the other tabs keep their share.
+TAB_CPU_SHARE = 0.15
+TAB_CPU_BURST_S = 1.0
+
+
+class CpuBudget:
+    """A token bucket of CPU seconds shared by one tab's threads."""
+
+    def __init__(self, share: float = TAB_CPU_SHARE, burst_s: float = TAB_CPU_BURST_S):
+        self.share, self.burst_s = share, burst_s
+        self.allowance, self.refilled = burst_s, time.perf_counter()
+        self.lock = threading.Lock()
+
+    def charge(self, cpu_s: float) -> float:
+        """Book ``cpu_s``; returns how long the tab should now wait [s] (0: within its share)."""
+        with self.lock:
+            now = time.perf_counter()
+            self.allowance = min(self.burst_s, self.allowance + (now - self.refilled) * self.share) - cpu_s
+            self.refilled = now
+            return max(0.0, -self.allowance / self.share)
+
+
 class _Closed(Exception):
     """The tab closed while its lab was being built."""
 
@@ -121,6 +145,7 @@ class LabSession:
         self.recording: tuple[str, bytes] | None = None      # the uploaded file, as it came
         self.problems: set[str] = set()                       # simulation-thread errors already shown
         self.token_attempts = 0
+        self.budget = CpuBudget()
         self.worker = threading.Thread(target=self._work, args=(exercise,), name=f"tab-{client.client_id}",
                                        daemon=True)
         self.worker.start()
@@ -161,10 +186,12 @@ class LabSession:
                     if self.closed:
                         break
                     events, self.events = list(self.events.values()), {}
+                spent = time.thread_time()
                 for action in events:
                     self._do(action)
                 if self._autosave_now():
                     self._autosave()
+                self._pause(self.budget.charge(time.thread_time() - spent), self.wakeup)
         except _Closed:
             pass
         finally:
@@ -181,6 +208,12 @@ class LabSession:
         except Exception as error:  # noqa: BLE001 - any failure of one event is shown, the tab goes on
             traceback.print_exc()
             self._show_error(f"⚠️ That did not work: {escaped(error)}")
+
+    def _pause(self, seconds: float, condition: threading.Condition) -> None:
+        """Wait ``seconds`` (the tab used more than its share), or until the tab closes."""
+        if seconds > 0:
+            with condition:
+                condition.wait_for(lambda: self.closed, seconds)
 
     def _check_open(self) -> None:
         if self.closed:
@@ -536,10 +569,13 @@ class LabSession:
                 if self.closed:
                     return
                 (generation, exercise, values), self.analysis_request = self.analysis_request, None
+            spent = time.thread_time()
             try:
                 for result in _analyses(exercise.analyse(values)):
                     if self.analysis_request is not None or not self._show(generation, result):
                         break
+                    self._pause(self.budget.charge(time.thread_time() - spent), self.analysis_wakeup)
+                    spent = time.thread_time()
             except (ValueError, ArithmeticError) as error:   # incl. ParameterError, LinAlgError: the tab's
                 traceback.print_exc()                         # analyses go on at the next slider move
                 with self.gui_lock:

@@ -5,7 +5,7 @@ viser reads each connection's messages in ``viser.infra._infra._message_consumer
 and hands every one to its handlers (GUI updates become thread-pool jobs).
 ``install`` replaces that reader with ``_consumer`` below, which per connection
 
-- **coalesces GUI updates**: an update is passed on at once if the control had
+- **coalesces GUI updates** (and camera moves): an update is passed on at once if the control had
   none in the last ``COALESCE_S``; otherwise only the newest value is kept and
   passed on when that interval is over.  A burst of 10,000 slider updates
   costs their decoding and one dispatch per control per interval;
@@ -24,8 +24,10 @@ import asyncio
 import inspect
 import sys
 import threading
+import time
 from collections.abc import Callable
 
+import msgspec
 import viser
 import viser.infra._infra as infra
 from viser import _messages
@@ -34,6 +36,11 @@ from viser import _messages
 COALESCE_S = 0.02
 #: Largest upload accepted (the recordings' limit).
 MAX_UPLOAD_BYTES = 20_000_000
+#: Share of the event loop one connection's messages may take, and the burst it may take at once [s].
+LOOP_SHARE = 0.05
+LOOP_BURST_S = 0.02
+#: A connection yields the event loop to the others after this many messages in a row.
+YIELD_EVERY = 32
 #: Invalid messages from one client beyond this many are not reported again in its tab.
 REPORTS_PER_CLIENT = 5
 
@@ -130,69 +137,95 @@ def _describe_bytes(size: float) -> str:
     return f"{size / 1e6:.1f} MB"
 
 
+class _Header(msgspec.Struct):
+    """The two fields that decide what happens to a message (the rest is decoded only if needed)."""
+
+    type: str
+    uuid: object = None
+
+
+_HEADER = msgspec.msgpack.Decoder(_Header)
+_COALESCED = {"GuiUpdateMessage", "ViewerCameraMessage"}
+
+
 async def _consumer(websocket, handle_message: Callable, message_class) -> None:
-    """viser's message reader with coalescing, upload limits and reports (see the module docstring)."""
+    """viser's message reader with coalescing, upload limits, reports and a share of the
+    event loop per connection (see the module docstring)."""
     traffic = _installed
     if traffic is None:
         await _original_consumer(websocket, handle_message, message_class)
         return
     loop = asyncio.get_running_loop()
     client_id: int | None = None
-    pending: dict[str, _messages.GuiUpdateMessage] = {}   # control uuid -> newest merged update
-    last_sent: dict[str, float] = {}                      # control uuid -> loop time of its last dispatch
-    uploads: dict[str, list[int]] = {}                    # transfer uuid -> [declared bytes, accepted bytes]
+    pending: dict[str, bytes] = {}                # control uuid (or "camera") -> newest raw update
+    last_sent: dict[str, float] = {}              # control uuid -> loop time of its last dispatch
+    uploads: dict[str, list[int]] = {}            # transfer uuid -> [declared bytes, accepted bytes]
     scheduled: set[str] = set()
+    allowance, refilled, count = LOOP_BURST_S, time.perf_counter(), 0
 
-    def dispatch(uuid: str) -> None:
-        scheduled.discard(uuid)
-        message = pending.pop(uuid, None)
-        if message is not None:
-            last_sent[uuid] = loop.time()
+    def decode(raw: bytes):
+        try:
+            return message_class.deserialize(raw)
+        except Exception as error:  # noqa: BLE001 - anything a hostile or broken client can send
+            traffic.invalid(client_id, f"undecodable: {type(error).__name__}")
+            return None
+
+    def dispatch(key: str) -> None:
+        scheduled.discard(key)
+        raw = pending.pop(key, None)
+        if raw is None:
+            return
+        last_sent[key] = loop.time()
+        message = decode(raw)
+        if isinstance(message, _messages.GuiUpdateMessage) and not isinstance(message.updates, dict):
+            traffic.invalid(client_id, "malformed GUI update")
+        elif message is not None:
             traffic.stats["dispatched_updates"] += 1
             handle_message(message)
 
-    while True:
-        raw = await websocket.recv()
-        traffic.stats["received"] += 1
-        if client_id is None:
-            client_id = traffic.client_id_of(websocket)
+    def take(raw) -> None:
+        """Act on one message: coalesce, check, or pass on."""
         if not isinstance(raw, bytes):
             traffic.invalid(client_id, "a text frame")
-            continue
+            return
         try:
-            message = message_class.deserialize(raw)
-        except Exception as error:  # noqa: BLE001 - anything a hostile or broken client can send
-            traffic.invalid(client_id, f"undecodable: {type(error).__name__}")
-            continue
-        if isinstance(message, _messages.GuiUpdateMessage):
-            if not isinstance(message.uuid, str) or not isinstance(message.updates, dict):
+            header = _HEADER.decode(raw)
+        except (msgspec.DecodeError, msgspec.ValidationError) as error:
+            traffic.invalid(client_id, f"undecodable: {str(error)[:60]}")
+            return
+        if header.type in _COALESCED:
+            if header.type == "ViewerCameraMessage":
+                key = "camera"                             # the newest view is all that matters
+            elif isinstance(header.uuid, str):
+                key = header.uuid
+            else:
                 traffic.invalid(client_id, "malformed GUI update")
-                continue
-            uuid = message.uuid
-            if uuid in pending:
-                pending[uuid].updates.update(message.updates)
+                return
+            if key in pending:
                 traffic.stats["coalesced"] += 1
-                continue
-            pending[uuid] = message
-            wait = last_sent.get(uuid, -1e9) + COALESCE_S - loop.time()
+            pending[key] = raw                             # the newest value wins
+            wait = last_sent.get(key, -1e9) + COALESCE_S - loop.time()
             if wait <= 0:
-                dispatch(uuid)
-            elif uuid not in scheduled:
-                scheduled.add(uuid)
-                loop.call_later(wait, dispatch, uuid)
-            continue
+                dispatch(key)
+            elif key not in scheduled:
+                scheduled.add(key)
+                loop.call_later(wait, dispatch, key)
+            return
+        message = decode(raw)
+        if message is None:
+            return
         if isinstance(message, _messages.FileTransferStartUpload):
             declared = message.size_bytes
             if not isinstance(declared, int) or not isinstance(message.part_count, int) or declared < 0 \
                     or message.part_count < 0:
                 traffic.invalid(client_id, "malformed upload")
-                continue
+                return
             if declared > MAX_UPLOAD_BYTES:
                 traffic.stats["refused_uploads"] += 1
                 if client_id is not None:
                     traffic.report_to_tab(client_id, f"The file is {_describe_bytes(declared)}; the largest "
                                                      f"accepted is {_describe_bytes(MAX_UPLOAD_BYTES)}.")
-                continue
+                return
             uploads[message.transfer_uuid] = [declared, 0]
         elif isinstance(message, _messages.FileTransferPart):
             budget = uploads.get(message.transfer_uuid)
@@ -201,11 +234,29 @@ async def _consumer(websocket, handle_message: Callable, message_class) -> None:
                 if budget is not None:
                     uploads.pop(message.transfer_uuid, None)
                     traffic.invalid(client_id, "upload parts beyond the declared size")
-                continue
+                return
             budget[1] += len(content)
             if budget[1] == budget[0]:
                 uploads.pop(message.transfer_uuid, None)
         handle_message(message)
+
+    while True:
+        raw = await websocket.recv()
+        began = time.perf_counter()
+        traffic.stats["received"] += 1
+        if client_id is None:
+            client_id = traffic.client_id_of(websocket)
+        take(raw)
+        # This connection's share of the event loop: beyond it, stop reading for a while
+        # (the client's sends back up in TCP), and let the other connections run regularly.
+        now = time.perf_counter()
+        allowance = min(LOOP_BURST_S, allowance + (began - refilled) * LOOP_SHARE) - (now - began)
+        refilled = now
+        count += 1
+        if allowance < 0:
+            await asyncio.sleep(-allowance / LOOP_SHARE)
+        elif count % YIELD_EVERY == 0:
+            await asyncio.sleep(0)
 
 
 def callback(function: Callable) -> Callable:

@@ -135,7 +135,7 @@ def parse(filename: str, content: bytes, min_rows: int = MIN_ROWS) -> Recording:
         raise ParameterError(f"{filename}: no header line; expected columns {', '.join(COLUMNS)}")
     if len(rows) < min_rows:
         where = f", line {lines[-1]}" if lines else ""
-        raise ParameterError(f"{filename}{where}: the file ends after {len(rows)} samples; "
+        raise ParameterError(f"{filename}{where}: the file ends after {len(rows)} data rows; "
                              f"at least {min_rows} are needed")
     data = np.array(rows)
     intervals = np.diff(data[:, 0])

@@ -49,7 +49,7 @@ def test_absurd_or_non_finite_values_name_line_and_column(tmp_path, capsys, valu
     def edit(lines):
         i, _ = _data_row(lines, 100)
         t, ref, _, u = lines[i].split(",")
-        lines[i] = ",".join((t, ref, value, u))
+        lines[i] = f"{t},{ref},{value},{u}"
     path = _recording(tmp_path, edit)
     _, line = _data_row(SHIPPED.splitlines(), 100)
     err = _one_line_error(capsys, ["run", "maglev_tuning", "--data", path])
@@ -73,7 +73,7 @@ def test_too_few_samples_for_the_analysis(tmp_path, capsys):
         del lines[i:]
     err = _one_line_error(capsys, ["run", "maglev_tuning", "--data", _recording(tmp_path, edit)])
     _, last_line = _data_row(SHIPPED.splitlines(), 49)
-    assert f"line {last_line}" in err and "50 samples" in err and "at least" in err
+    assert f"line {last_line}" in err and "50 data rows" in err and "at least" in err
 
 
 def test_seed_for_an_exercise_without_randomness(capsys):
