@@ -2,6 +2,8 @@
 
     python -m app [--host H] [--port P] [--exercise NAME] [--data-dir DIR] [--token T]
                   [--allow-origin URL ...]     start the browser lab (default; also ``serve``)
+    python -m app serve --workers N [same options] [--worker-ports FIRST]   N lab processes behind HAProxy
+    python -m app haproxy-config --backend HOST:PORT ...    HAProxy configuration for several machines
     python -m app list [--json]                exercises and their parameters
     python -m app run NAME [--set N=V ...] [--duration S] [--seed N] [--data FILE] [--json]
     python -m app run --code KN-7Q3M [--set N=V ...] [--json]   a saved experiment, headless
@@ -9,6 +11,7 @@
     python -m app bench [--json] [--browser]   throughput benchmark; --browser: slider-to-readout latency
     python -m app reproduce [--json] [--quick] [--html DIR] [--exercise NAME ...]
                                                every paper claim measured; exit 1 if one fails
+    python -m app bench --clients N [--workers W]   headless tabs: scope updates/s, bytes/s, CPU; capacity
 
 Bad input (unknown exercise or parameter, non-numbers, NaN, out of range, a
 busy port, an unknown code) exits with status 2 and one line naming the
@@ -58,7 +61,21 @@ def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m app", description="AMB estimation lab")
     _serve_options(parser, defaults=True)
     sub = parser.add_subparsers(dest="command")
-    _serve_options(sub.add_parser("serve", help="start the browser lab (the default)"), defaults=False)
+    serve = sub.add_parser("serve", help="start the browser lab (the default); --workers N: N processes "
+                                         "behind HAProxy")
+    _serve_options(serve, defaults=False)
+    serve.add_argument("--workers", type=int, default=None, metavar="N",
+                       help="lab processes behind HAProxy (default: one per core; 1: one process, no HAProxy)")
+    serve.add_argument("--worker-ports", type=int, default=None, metavar="FIRST",
+                       help="the workers' loopback ports: FIRST, FIRST+1, ... (default: --port + 1)")
+    balancer = sub.add_parser("haproxy-config", help="print an HAProxy configuration for lab processes "
+                                                     "on several machines")
+    balancer.add_argument("--backend", action="append", required=True, metavar="HOST:PORT",
+                          help="a lab process or a machine's 'serve --workers' address (repeatable)")
+    balancer.add_argument("--host", dest="bind_host", default="0.0.0.0",
+                          help="address the balancer listens on (default 0.0.0.0)")
+    balancer.add_argument("--port", dest="bind_port", type=int, default=8080,
+                          help="port the balancer listens on (default 8080)")
     listing = sub.add_parser("list", help="list exercises and their parameters")
     listing.add_argument("--json", action="store_true", help="print JSON")
     run = sub.add_parser("run", help="run one exercise headless and print its metrics")
@@ -98,6 +115,21 @@ def _parser() -> argparse.ArgumentParser:
                                 "claims (PNG embedded)")
     reproduce.add_argument("--exercise", action="append", default=[], metavar="NAME", dest="only",
                            help="only this exercise (repeatable; default: all)")
+    bench.add_argument("--clients", type=int, default=None, metavar="N",
+                       help="instead: N headless websocket tabs against a started server (scope updates/s, "
+                            "bytes/s, server CPU per tab; capacity)")
+    bench.add_argument("--workers", type=int, default=1, metavar="W",
+                       help="with --clients: lab processes behind HAProxy (default 1: one process, no HAProxy)")
+    bench.add_argument("--steps", type=int, default=4, help="with --clients: ramp up in this many steps")
+    bench.add_argument("--window", type=float, default=8.0, help="with --clients: seconds measured per step")
+    bench.add_argument("--bench-port", type=int, default=8140,
+                       help="with --clients: loopback port of the server (workers: the next ports)")
+    bench.add_argument("--breakdown", action="store_true", help="with --clients: bytes by message kind")
+    bench.add_argument("--slider-every", type=int, default=3, metavar="K",
+                       help="with --clients: a tab moves a slider with every K-th camera message (every ~3 s); "
+                            "0: never (streaming cost only)")
+    bench.add_argument("--all-steps", action="store_true",
+                       help="with --clients: go on after a step below the target (default: stop there)")
     return parser
 
 
@@ -271,6 +303,18 @@ def main(argv: list[str] | None = None) -> int:
             from app.browser_bench import main as browser_bench_main
             with tempfile.TemporaryDirectory() as scratch:
                 return browser_bench_main(args.json, Path(scratch) / "server.log")
+        if args.command == "haproxy-config":
+            from app.hall import check_port, haproxy_config, parse_backend
+            backends = [parse_backend(b) for b in args.backend]
+            print(haproxy_config(args.bind_host, check_port(args.bind_port), backends,
+                                 note="\n# Start the lab on every backend with the same --token; "
+                                      "run: haproxy -f THIS_FILE"), end="")
+            return 0
+        if args.command == "bench" and args.clients is not None:
+            from app.load_bench import main as load_bench_main
+            return load_bench_main(args.clients, args.workers, args.steps, args.window, args.exercise,
+                                   args.bench_port, args.breakdown, args.json, args.all_steps,
+                                   args.slider_every)
         if args.command == "bench":
             from app.bench import main as bench_main
             return bench_main(args.seconds, args.json)
@@ -282,6 +326,11 @@ def main(argv: list[str] | None = None) -> int:
         access.check_port(args.port)
         from app.server import Settings, serve
         settings = Settings.from_args(args)
+        if args.command == "serve":
+            from app.hall import check_workers, serve_hall
+            workers = check_workers(args.workers)
+            if workers > 1:
+                return serve_hall(settings, workers, args.worker_ports, args.allow_origin or [])
     except ParameterError as error:
         print(f"error: {error}", file=sys.stderr)
         return USAGE_ERROR

@@ -44,7 +44,9 @@ SCENE_REFRESH = {"1 update/s": 1.0, "10 updates/s (needs a GPU)": 0.1, "still": 
 SCENE_QUIET_AFTER_INPUT_S = 0.5   # the 3D view holds still this long after a control moves: readouts first
 LIVE_READOUT_PERIOD_S = 1.0       # the readouts of the scope window follow the running simulation
 SCOPE_WINDOW_S = 0.05             # simulated time shown on the scope (at the slowest time scale)
-SCOPE_POINTS = 500                # points sent per series per frame
+SCOPE_BUCKETS = 75                # per chart and frame: the extremes of the roughest series in this many
+                                  # time buckets, i.e. <= 150 points across the ~500 px plot (see _scope_rows)
+ROUGHNESS_ROWS = 200              # newest rows that decide which series is the roughest
 SCOPE_ROWS = 20_000               # most samples the scope keeps
 POLE_COLORS = ("#7f7f7f", "#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e")
 CONTROL_WIDTH_PX = 380            # the docked controls (left)
@@ -641,8 +643,14 @@ class LabSession:
         """The simulation thread: an error in one frame is reported and the next frame goes on."""
         carry, last, next_scene, next_readouts = 0.0, time.perf_counter(), 0.0, 0.0
         T = self.simulation.sample_time_s
+        next_frame = last
         while self._current(generation):
-            time.sleep(FRAME_S)
+            next_frame += FRAME_S                     # a steady frame rate: the frame's own work is not added
+            delay = next_frame - time.perf_counter()
+            if delay > 0:
+                time.sleep(delay)
+            else:
+                next_frame = time.perf_counter()      # behind (a busy server): no burst of frames to catch up
             if not self._current(generation):         # the tab closed or switched during the sleep
                 return
             now = time.perf_counter()
@@ -700,20 +708,80 @@ class LabSession:
         return {"time_s": float(row[0]), **{name: float(row[column]) for name, column in self.columns.items()}}
 
     def _draw(self) -> None:
+        """Send the scope charts: only when new samples arrived, as float32, and only the
+        rows ``_scope_rows`` picks (the chart's pixel width, not the buffer's length)."""
         with self.lock:
             buffer = self.buffer
-        if len(buffer) < 2:
+        if len(buffer) < 2 or buffer[-1, 0] == getattr(self, "drawn_until", None):
             return
-        rows = buffer[:: max(1, len(buffer) // SCOPE_POINTS)]
+        self.drawn_until = buffer[-1, 0]
+        sample_time = self.simulation.sample_time_s
+        with self.client.atomic():                    # one wake-up of the event loop per frame, not per chart
+            for chart, handle in zip(self.exercise.charts, self.charts):
+                self._draw_chart(chart, handle, buffer, sample_time)
+
+    def _draw_chart(self, chart: Chart, handle, buffer: np.ndarray, sample_time: float) -> None:
+        columns = [self.columns[s.column] for s in chart.series]
+        rows = buffer[_scope_rows(buffer, columns, sample_time)]
         t_ms = rows[:, 0] * 1e3
-        for chart, handle in zip(self.exercise.charts, self.charts):
-            columns = [t_ms]
-            if chart.band:
-                centre, sigma = rows[:, self.columns[chart.band[0]]], rows[:, self.columns[chart.band[1]]]
-                scale = chart.series[0].scale
-                columns += [(centre + 3 * sigma) * scale, (centre - 3 * sigma) * scale]
-            columns += [rows[:, self.columns[s.column]] * s.scale for s in chart.series]
-            handle.data = tuple(columns)
+        ys = []
+        if chart.band:
+            centre, sigma = rows[:, self.columns[chart.band[0]]], rows[:, self.columns[chart.band[1]]]
+            scale = chart.series[0].scale
+            ys += [(centre + 3 * sigma) * scale, (centre - 3 * sigma) * scale]
+        ys += [rows[:, column] * s.scale for s, column in zip(chart.series, columns)]
+        x = t_ms.astype(np.float32) if _float32_resolves(t_ms, sample_time * 1e3) else t_ms
+        data = (x, *(y.astype(np.float32) for y in ys))
+        # Straight to the wire: the handle's ``data`` setter would cast every column to float64.
+        handle._impl.props.data = data
+        handle._queue_update("data", data)
+
+
+def _scope_rows(buffer: np.ndarray, columns: list[int], sample_time_s: float,
+                buckets: int = SCOPE_BUCKETS) -> np.ndarray:
+    """Rows of the scope buffer to draw: the buffer's time span cut into ``buckets`` buckets
+    of whole samples, and in each the rows of the lowest and the highest value of the
+    roughest series among ``columns`` (largest mean step), plus the first and last rows.
+
+    Drawn as lines, these points trace the same envelope as every sample (a noisy trace
+    stays a band of the same height, a peak keeps its height), with at most ``2 buckets + 2``
+    points.  The buckets are aligned to absolute sample numbers, so a sample once chosen
+    stays chosen while the trace scrolls (no shimmer)."""
+    n = len(buffer)
+    size = -(-n // buckets)
+    if size <= 2:
+        return np.arange(n)
+    key = buffer[:, 0]
+    if len(columns) == 1:
+        if np.isfinite(buffer[:, columns[0]]).all():
+            key = buffer[:, columns[0]]
+    else:
+        recent = buffer[-ROUGHNESS_ROWS:, columns]
+        finite = np.isfinite(recent).all(axis=0)
+        if finite.any():
+            roughness = np.where(finite, np.abs(np.diff(recent, axis=0)).sum(axis=0), -1.0)
+            choice = buffer[:, columns[int(np.argmax(roughness))]]
+            if np.isfinite(choice).all():
+                key = choice
+    first = round(buffer[0, 0] / sample_time_s)
+    lead = first % size
+    padded = np.empty(lead + n + (-(lead + n)) % size)
+    padded[:lead], padded[lead:lead + n], padded[lead + n:] = key[0], key, key[-1]   # the edge rows' values
+    padded = padded.reshape(-1, size)
+    base = np.arange(len(padded)) * size - lead
+    low, high = base + padded.argmin(axis=1), base + padded.argmax(axis=1)
+    rows = np.empty(2 * len(base) + 2, dtype=np.intp)
+    rows[0], rows[-1] = 0, n - 1
+    rows[1:-1:2], rows[2:-1:2] = np.minimum(low, high), np.maximum(low, high)   # in time order
+    np.clip(rows, 0, n - 1, out=rows)
+    keep = np.empty(len(rows), dtype=bool)
+    keep[0], keep[1:] = True, rows[1:] != rows[:-1]
+    return rows[keep]
+
+
+def _float32_resolves(t_ms: np.ndarray, step_ms: float) -> bool:
+    """Whether float32 keeps times ``step_ms`` apart distinct (long runs need float64)."""
+    return bool(np.spacing(np.float32(np.abs(t_ms).max())) <= step_ms / 16)
 
 
 def _plot_chart(plot: Plot) -> tuple[tuple, dict]:
