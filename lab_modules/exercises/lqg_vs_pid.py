@@ -333,10 +333,10 @@ def redesign_figures(values: dict) -> dict[str, float]:
 
 #: LQG family: the paper's weights with q_x and q_v scaled together by one factor
 #: and q_ξ by another, each over four decades (q_i, R_J as in the paper).
-FRONT_LQG_FACTORS = np.geomspace(0.1, 1000.0, 7)
+FRONT_LQG_FACTORS = np.geomspace(0.1, 1000.0, 9)
 #: PID family: the gain K times these factors, at each derivative time T_D
 #: (τ / T_D and T_I from the sliders).
-FRONT_PID_GAIN_FACTORS = np.geomspace(0.2, 4.0, 14)
+FRONT_PID_GAIN_FACTORS = np.geomspace(0.25, 4.0, 13)
 FRONT_PID_DERIVATIVE_TIMES_S = (0.5e-3, 1e-3, 1.5e-3, 2e-3, 3e-3, 4e-3, 6e-3)
 #: A design counts on a front only if every closed-loop pole is damped at least this
 #: much (lab choice): lighter damped loops ring for many periods; their step stiffness
