@@ -20,7 +20,19 @@ Step figures (overshoot, settling time, peak and RMS control current, the
 dynamic stiffness s_dyn = Δf_z / Δx_max of §IV) come from noise-free runs of
 the compiled loop on the chosen plant (nonlinear eq. 10 by default): a step
 at t = 0 after 5 ms at rest, observed for 150 ms.  Settling: the last time
-the rotor is outside ±2 % of the reference step.
+the rotor is outside ±2 % of the reference step.  A loop that loses the
+rotor reports the largest disturbance step it holds instead.
+
+Stiffness in two definitions, on the linear loop with the filter in use:
+the step stiffness (Fig. 9's definition) and the minimum over frequency of
+|F/X(jω)|.  With eq. 22 read in SI units the LQG is the softer loop by both
+(a documented deviation, see ``CLAIMS``).  What an LQG buys here the
+trade-off fronts show: sweeps of both families (LQG weights, PID gain and
+T_D) plotted as stiffness against noise current and against the current a
+reference step costs.  The I-PD option (the PID with its reference through
+the integral only) separates the LQG's structural advantage on set-point
+changes from its optimality; the redesign preset is one LQG on the front
+that is as stiff as the printed PID.
 """
 
 from __future__ import annotations
@@ -871,10 +883,15 @@ def step_plots(tests: dict, values: dict) -> list[Plot]:
 
 FRONT_COLORS = {"LQG": COLORS["LQG"], "PID": COLORS["PID"], "I-PD": "#2ca02c", "rings": "#c7c7c7",
                 "LQG in use": "#5c0000", "PID in use": "#08306b"}
+RINGS = f"ζ < {FRONT_MIN_DAMPING:g} (rings)"
+#: Series (label, colour) of the front plots, in order.
 FRONT_SERIES = {
-    "noise": ("LQG designs", "PID designs", f"ζ < {FRONT_MIN_DAMPING:g} (rings)", "LQG in use", "PID in use"),
-    "current": ("LQG designs", "PID designs", "I-PD designs", f"ζ < {FRONT_MIN_DAMPING:g} (rings)",
-                "LQG in use", "PID in use"),
+    "noise": (("LQG designs", FRONT_COLORS["LQG"]), ("PID designs", FRONT_COLORS["PID"]),
+              (RINGS, FRONT_COLORS["rings"]), ("LQG in use", FRONT_COLORS["LQG in use"]),
+              ("PID in use", FRONT_COLORS["PID in use"])),
+    "current": (("LQG designs", FRONT_COLORS["LQG"]), ("PID designs", FRONT_COLORS["PID"]),
+                ("I-PD designs", FRONT_COLORS["I-PD"]), (RINGS, FRONT_COLORS["rings"]),
+                ("LQG in use", FRONT_COLORS["LQG in use"]), ("PID in use", FRONT_COLORS["PID in use"])),
 }
 
 
@@ -917,13 +934,12 @@ def front_plots(values: dict, linear: dict[str, dict] | None) -> list[Plot]:
     current_label = "peak coil current on the reference step [A]"
     step_label, dynamic_label = "step stiffness Δf/x_max [N/µm]", "min dynamic stiffness min|F/X| [N/µm]"
     empty = np.zeros(0)
-    if linear is None:
-        return [scatter(titles[0], noise_label, step_label,
-                        [(label, empty, empty, "#000000") for label in FRONT_SERIES["noise"]]),
-                scatter(titles[1], current_label, step_label,
-                        [(label, empty, empty, "#000000") for label in FRONT_SERIES["current"]]),
-                scatter(titles[2], noise_label, dynamic_label,
-                        [(label, empty, empty, "#000000") for label in FRONT_SERIES["noise"]])]
+    if linear is None:                      # same series and colours: the browser keeps the first ones
+        return [scatter(title, x_label, y_label, [(label, empty, empty, color) for label, color in series])
+                for title, x_label, y_label, series in (
+                    (titles[0], noise_label, step_label, FRONT_SERIES["noise"]),
+                    (titles[1], current_label, step_label, FRONT_SERIES["current"]),
+                    (titles[2], noise_label, dynamic_label, FRONT_SERIES["noise"]))]
     lqg, pid_family = fronts(values)
     L, Pf = lqg.admissible, pid_family.admissible
 
@@ -935,7 +951,7 @@ def front_plots(values: dict, linear: dict[str, dict] | None) -> list[Plot]:
             ("LQG designs", lqg.noise_rms_current_a[L], per_um(stiffness_of(lqg)[L]), FRONT_COLORS["LQG"]),
             ("PID designs", pid_family.noise_rms_current_a[Pf], per_um(stiffness_of(pid_family)[Pf]),
              FRONT_COLORS["PID"]),
-            (FRONT_SERIES["noise"][2],
+            (RINGS,
              np.r_[lqg.noise_rms_current_a[~L], pid_family.noise_rms_current_a[~Pf]],
              per_um(np.r_[stiffness_of(lqg)[~L], stiffness_of(pid_family)[~Pf]]), FRONT_COLORS["rings"]),
             *((f"{name} in use", linear[name]["noise_rms_current_a"], per_um(linear[name][key]),
@@ -948,7 +964,7 @@ def front_plots(values: dict, linear: dict[str, dict] | None) -> list[Plot]:
          FRONT_COLORS["PID"]),
         ("I-PD designs", pid_family.peak_current_ipd_a_per_m[Pf] * step_m,
          per_um(pid_family.step_stiffness_n_per_m[Pf]), FRONT_COLORS["I-PD"]),
-        (FRONT_SERIES["current"][3],
+        (RINGS,
          np.r_[lqg.peak_current_a_per_m[~L], pid_family.peak_current_a_per_m[~Pf]] * step_m,
          per_um(np.r_[lqg.step_stiffness_n_per_m[~L], pid_family.step_stiffness_n_per_m[~Pf]]),
          FRONT_COLORS["rings"]),
