@@ -330,6 +330,7 @@ def test_analysis_yields_quick_result_then_fronts():
         assert np.all(np.diff(plot.x) >= 0) and plot.points and plot.log_x
         assert np.isfinite(np.asarray(plot.series[0][1])).sum() > 10
     labels = [label for label, _, _ in last.readouts]
+    assert not [label for label in labels if "|" in label]          # a readout is a markdown table row
     assert any(label.startswith("Fronts:") for label in labels)
     assert any("largest disturbance step held" in label for label in labels)
 

@@ -704,7 +704,7 @@ class LqgVsPid(Exercise):
                 (f"{name}: peak control current, reference step", r["reference_peak_current_a"], "A"),
                 (f"{name}: RMS control current, reference step", r["reference_rms_current_a"], "A"),
                 (f"{name}: step stiffness Δf/x_max (linear)", f["step_stiffness_n_per_m"] * 1e-6, "N/µm"),
-                (f"{name}: min dynamic stiffness |F/X| (linear)", f["min_dynamic_stiffness_n_per_m"] * 1e-6, "N/µm"),
+                (f"{name}: min dynamic stiffness (linear, worst frequency)", f["min_dynamic_stiffness_n_per_m"] * 1e-6, "N/µm"),
                 (f"{name}: … at frequency", f["min_dynamic_stiffness_frequency_hz"], "Hz"),
                 (f"{name}: largest deviation, disturbance step", r["disturbance_max_deviation_m"] * 1e6, "µm"),
                 (f"{name}: s_dyn of the time run (chosen plant)",
