@@ -14,6 +14,7 @@ import concurrent.futures
 import multiprocessing
 import os
 import threading
+import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -21,6 +22,7 @@ from lab_modules.claims import markdown_table, render_worksheet
 from lab_modules.exercises import Exercise
 
 STATIC = Path(__file__).resolve().parent.parent / "static"
+PARENT_CHECK_S = 1.0            # how often the measuring process checks that the server still runs
 NICENESS = 19                   # the measuring process yields to the tabs (and anything else) on the machine
 
 _lock = threading.Lock()
@@ -29,11 +31,19 @@ _waiting: dict[str, list[Callable[[str], None]]] = {}       # exercise name -> c
 _executor: concurrent.futures.ProcessPoolExecutor | None = None
 
 
-def _nice() -> None:
+def _worker_start(server_pid: int) -> None:
+    """In the background process: yield the CPU, and exit when the server is gone
+    (a killed server must not leave its measuring process behind)."""
     try:
         os.nice(NICENESS)
     except OSError:
         pass
+
+    def watch() -> None:
+        while os.getppid() == server_pid:
+            time.sleep(PARENT_CHECK_S)
+        os._exit(0)
+    threading.Thread(target=watch, name="server-watch", daemon=True).start()
 
 
 def _measure(name: str) -> list[float]:
@@ -69,7 +79,8 @@ def when_measured(exercise: Exercise, callback: Callable[[str], None]) -> None:
             if first:
                 if _executor is None:
                     _executor = concurrent.futures.ProcessPoolExecutor(
-                        max_workers=1, mp_context=multiprocessing.get_context("spawn"), initializer=_nice)
+                        max_workers=1, mp_context=multiprocessing.get_context("spawn"), initializer=_worker_start,
+                        initargs=(os.getpid(),))
                 future = _executor.submit(_measure, exercise.name)
                 future.add_done_callback(lambda done, e=exercise: _finished(e, done))
     if values is not None:
