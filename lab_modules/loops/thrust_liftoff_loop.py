@@ -25,10 +25,11 @@ paper's A/mm.  The kernel releases the GIL, so browser tabs run in parallel.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numba
 import numpy as np
+import scipy.linalg
 
 from lab_modules.estimators.kalman import STATE_SIZE, predict, update
 from lab_modules.estimators.thrust_kalman import H, ThrustFilterDesign
@@ -42,7 +43,7 @@ KERNEL_COLUMNS = ("x_true_m", "x_measured_m", "x_estimated_m", "x_sigma_m", "vel
                   "velocity_estimated_m_per_s", "current_command_a", "current_a", "kalman_gain_x",
                   "estimation_error_m")
 #: Constant columns the simulation adds (lines on the scope).
-LINE_COLUMNS = ("touchdown_upper_m", "touchdown_lower_m", "current_limit_a", "current_limit_negative_a")
+LINE_COLUMNS = ("touchdown_upper_m", "touchdown_lower_m", "current_limit_a", "current_limit_negative_a", "zero")
 TRACE_COLUMNS = KERNEL_COLUMNS + LINE_COLUMNS
 COLUMN = {name: i for i, name in enumerate(TRACE_COLUMNS)}
 
@@ -220,20 +221,26 @@ class ThrustSimulation:
     columns: tuple[str, ...] = TRACE_COLUMNS
     step: int = 0
     status: int = OK
-    explanation: str = ""
-    _state: dict = field(default_factory=dict)
+    explanation: str = ""                          # appended to the stop message (e.g. the linear verdict)
+    relaunch_s: float = 0.0                        # > 0: lift off again every relaunch_s (browser view)
 
     def __post_init__(self):
-        s, b = self.setup, self.setup.bearing
-        self.sample_time_s = b.sample_time_s
+        self.sample_time_s = self.setup.bearing.sample_time_s
         self.rng = np.random.default_rng(self.seed)
+        self._configure()
+        self.relaunch()
+
+    def relaunch(self) -> None:
+        """Back to the start: collar at rest at the start position, filter at X0 and P0
+        (§3), PID and current loop at rest."""
+        s, b = self.setup, self.setup.bearing
         self.plant = np.array([s.start_position_m, 0.0])
         self.coil = np.zeros(2)
         self.filter = s.design.filter(x0=(s.start_position_m, 0.0))
         self.pid = np.array([0.0, -s.start_position_m, 0.0])
-        self.memory = np.array([0.0 if b.touchdown_clearance_m - abs(s.start_position_m) <= LIFT_MARGIN_M
-                                else 1.0, 0.0])
-        self._configure()
+        resting = b.touchdown_clearance_m - abs(s.start_position_m) <= LIFT_MARGIN_M
+        self.memory = np.array([0.0 if resting else 1.0, 0.0])
+        self.launched_at = self.step
 
     def _configure(self):
         s, b = self.setup, self.setup.bearing
@@ -246,7 +253,7 @@ class ThrustSimulation:
         self._sigma = np.array([s.sensor_noise_m, s.force_noise_n]) if s.noise_on else np.zeros(2)
         self._constants = b.force_constants()
         self._lines = np.array([b.touchdown_clearance_m, -b.touchdown_clearance_m,
-                                s.current_limit_a, -s.current_limit_a])
+                                s.current_limit_a, -s.current_limit_a, 0.0])
 
     def retuned(self, setup: ThrustSetup) -> ThrustSimulation:
         """The running experiment with new settings: plant, filter estimate and PID state carry on."""
@@ -263,6 +270,19 @@ class ThrustSimulation:
     def advance(self, n_steps: int) -> np.ndarray:
         if self.status != OK or n_steps <= 0:
             return np.empty((0, 1 + len(self.columns)))
+        if self.relaunch_s <= 0.0:
+            return self._advance(n_steps)
+        period = max(round(self.relaunch_s / self.sample_time_s), 1)
+        parts, left = [], n_steps
+        while left > 0 and self.status == OK:
+            if self.step - self.launched_at >= period:
+                self.relaunch()
+            chunk = min(left, period - (self.step - self.launched_at))
+            parts.append(self._advance(chunk))
+            left -= chunk
+        return np.concatenate(parts)
+
+    def _advance(self, n_steps: int) -> np.ndarray:
         s, b, kf = self.setup, self.setup.bearing, self.filter
         noise = self.rng.standard_normal((n_steps, 2))
         trace = np.empty((n_steps, 1 + len(self.columns)))
@@ -298,49 +318,92 @@ class ThrustSimulation:
         return text + (" " + self.explanation if self.explanation else "")
 
 
-def closed_loop_matrix(setup: ThrustSetup, current_loop: bool | None = None) -> np.ndarray:
-    """The loop of ``run`` on the linear plant, without noise, saturation or stops, as
-    one matrix M (state_{k+1} = M state_k), with the steady-state filter gain K∞.
+@dataclass(frozen=True)
+class LinearLoop:
+    """The loop of ``run`` on the linear plant, without saturation or stops, with the
+    steady-state filter gain K∞:  s_{k+1} = M s_k + N n_k,  y_k = C s_k + D n_k,
+    noise n = (sensor V [m], force f_dis [N]) per sample.
 
     State: plant (x, v), G(s) (2, if on), integral, previous error, derivative term,
-    filter prediction (x̂, v̂).  Built by pushing the unit vectors through one step
-    written like the kernel's (so the pole map analyses the loop that runs)."""
+    filter prediction (x̂, v̂) (if ``with_filter``).  Outputs: ``OUTPUTS``."""
+
+    M: np.ndarray
+    N: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+
+    def poles(self) -> np.ndarray:
+        """z-plane poles."""
+        return np.linalg.eigvals(self.M)
+
+    def stable(self) -> bool:
+        return bool(np.max(np.abs(self.poles())) < 1.0)
+
+    def output_std(self, sensor_noise_m: float, force_noise_n: float) -> dict[str, float]:
+        """Steady-state standard deviation of each output for white noise of these
+        standard deviations (discrete Lyapunov equation, scipy); inf when unstable."""
+        if not self.stable():
+            return {name: float("inf") for name in OUTPUTS}
+        W = np.diag([sensor_noise_m**2, force_noise_n**2])
+        # the states span metres to amperes: balance M first (X = S X' S^T), or the solve is ill-conditioned
+        M, (scale, _) = scipy.linalg.matrix_balance(self.M, permute=False, separate=True)
+        N = self.N / scale[:, None]
+        X = scale[:, None] * scipy.linalg.solve_discrete_lyapunov(M, N @ W @ N.T) * scale[None, :]
+        var = np.einsum("ij,jk,ik->i", self.C, X, self.C) + np.einsum("ij,jk,ik->i", self.D, W, self.D)
+        return {name: float(np.sqrt(max(v, 0.0))) for name, v in zip(OUTPUTS, var)}
+
+
+#: Outputs of ``LinearLoop``: true x, measured z, corrected estimate x̂ [m], current command [A].
+OUTPUTS = ("x_true_m", "x_measured_m", "x_estimated_m", "current_command_a")
+
+
+def linear_loop(setup: ThrustSetup, current_loop: bool | None = None, with_filter: bool = True) -> LinearLoop:
+    """``LinearLoop`` of ``setup`` (G(s) as set, or forced on/off by ``current_loop``).
+
+    Built by pushing unit vectors through one step written like the kernel's, so the
+    pole map and the noise analysis describe the loop that runs.  ``with_filter=False``
+    drops the filter's states (only allowed for measured feedback, where the filter
+    is outside the loop)."""
     s, b = setup, setup.bearing
     T = b.sample_time_s
     with_g = s.current_loop if current_loop is None else current_loop
-    Phi, Gamma = b.exact_discretisation()[0], b.exact_discretisation()[2]
+    if not with_filter and s.use_estimate:
+        raise ValueError("the filter is inside the loop when the estimate is fed back")
+    Phi, _, Gamma = b.exact_discretisation()
     G_A, G_B, G_C, G_D = discrete_current_loop(T)
     Phi_f, B_f, _ = s.design.matrices
     K = s.design.steady_state[0]
     alpha = s.derivative_filter_s / (s.derivative_filter_s + T)
-    n = 2 + (2 if with_g else 0) + 3 + 2
+    o = 4 if with_g else 2                         # index of the integral
+    n = o + 3 + (2 if with_filter else 0)
 
-    def step(state):
+    def step(state, noise):
         x = state[:2]
         g = state[2:4] if with_g else np.zeros(2)
-        o = 4 if with_g else 2
-        integral, previous, d_term, x_pred = state[o], state[o + 1], state[o + 2], state[o + 3:o + 5]
-        x_corr = x_pred + K * (x[0] - x_pred[0])
-        e = -(x_corr[0] if s.use_estimate else x[0])
+        integral, previous, d_term = state[o], state[o + 1], state[o + 2]
+        z = x[0] + noise[0]
+        x_pred = state[o + 3:o + 5] if with_filter else np.zeros(2)
+        x_corr = x_pred + K * (z - x_pred[0])
+        e = -(x_corr[0] if s.use_estimate else z)
         raw_d = (-s.derivative_a_s_per_m * x_corr[1] if s.use_estimate and s.derivative_from_velocity
                  else s.derivative_a_s_per_m * (e - previous) / T)
         d_new = alpha * d_term + (1 - alpha) * raw_d
         command = s.proportional_a_per_m * e + integral + d_new
         i = G_C @ g + G_D * command if with_g else command
         out = np.empty(n)
-        out[:2] = Phi @ x + Gamma * b.current_stiffness_n_per_a * i
+        out[:2] = Phi @ x + Gamma * (b.current_stiffness_n_per_a * i + noise[1])
         if with_g:
             out[2:4] = G_A @ g + G_B * command
         out[o], out[o + 1], out[o + 2] = integral + s.integral_a_per_m_s * T * e, e, d_new
-        out[o + 3:o + 5] = Phi_f @ x_corr + B_f * i
-        return out
+        if with_filter:
+            out[o + 3:o + 5] = Phi_f @ x_corr + B_f * i
+        return out, np.array([x[0], z, x_corr[0], command])
 
-    return np.column_stack([step(column) for column in np.eye(n)])
-
-
-def closed_loop_poles(setup: ThrustSetup, current_loop: bool | None = None) -> np.ndarray:
-    """z-plane poles of ``closed_loop_matrix``."""
-    return np.linalg.eigvals(closed_loop_matrix(setup, current_loop))
+    zero_state, zero_noise = np.zeros(n), np.zeros(2)
+    by_state = [step(column, zero_noise) for column in np.eye(n)]
+    by_noise = [step(zero_state, column) for column in np.eye(2)]
+    return LinearLoop(M=np.column_stack([r[0] for r in by_state]), N=np.column_stack([r[0] for r in by_noise]),
+                      C=np.column_stack([r[1] for r in by_state]), D=np.column_stack([r[1] for r in by_noise]))
 
 
 def liftoff_figures(trace: dict[str, np.ndarray], start_m: float, column: str = "x_true_m") -> dict:
