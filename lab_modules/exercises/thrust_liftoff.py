@@ -60,6 +60,9 @@ PARAMETERS = (
     P("sensor_noise_um", "Sensor noise σ_v", "µm", 5.0, 0.0, 50.0,
       "Standard deviation of the eddy-current sensor's white noise (not in the paper: 5 µm).",
       step=0.5, group="Noise"),
+    P("noise_correlation_ms", "Sensor noise correlation time", "ms", 0.0, 0.0, 5.0,
+      "0 = white noise (the filter's assumption); > 0: first-order coloured noise of the same σ_v "
+      "(§3.2: the hardware's noise is not white).", step=0.05, group="Noise"),
     P("force_noise_n", "Plant force disturbance σ_f", "N", 0.0, 0.0, 5000.0,
       "Standard deviation of a white force on the collar, per 0.1 ms sample (eq. 3's f_dis; default off).",
       step=10.0, group="Noise"),
@@ -125,6 +128,7 @@ def setup(values: dict, **changes) -> ThrustSetup:
         nonlinear=values["force_law"] == "nonlinear",
         vertical=values["orientation"] == "vertical",
         sensor_noise_m=values["sensor_noise_um"] * 1e-6,
+        sensor_noise_correlation_s=values["noise_correlation_ms"] * 1e-3,
         force_noise_n=values["force_noise_n"],
         filter_q_n2=values["filter_q_n2"],
         filter_r_factor=values["filter_r_factor"],

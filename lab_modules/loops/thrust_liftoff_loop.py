@@ -30,6 +30,7 @@ from dataclasses import dataclass, replace
 import numba
 import numpy as np
 import scipy.linalg
+import scipy.signal
 
 from lab_modules.estimators.kalman import STATE_SIZE, predict, update
 from lab_modules.estimators.thrust_kalman import H, ThrustFilterDesign
@@ -197,6 +198,7 @@ class ThrustSetup:
     filter_q_n2: float = ThrustFilterDesign().process_noise_n2
     filter_r_factor: float = 1.0
     start_position_m: float = -0.75e-3
+    sensor_noise_correlation_s: float = 0.0        # > 0: first-order coloured sensor noise (std stays σ_v)
     noise_on: bool = True                          # False: the same run without any noise draws
 
     @property
@@ -285,6 +287,8 @@ class ThrustSimulation:
     def _advance(self, n_steps: int) -> np.ndarray:
         s, b, kf = self.setup, self.setup.bearing, self.filter
         noise = self.rng.standard_normal((n_steps, 2))
+        if s.sensor_noise_correlation_s > 0.0:
+            noise[:, 0] = self._colour(noise[:, 0], np.exp(-b.sample_time_s / s.sensor_noise_correlation_s))
         trace = np.empty((n_steps, 1 + len(self.columns)))
         G_A, G_B, G_C, G_D = self._current
         status, done = run(n_steps, self.step, b.sample_time_s, self.plant, self._constants,
@@ -297,6 +301,15 @@ class ThrustSimulation:
         self.step += done
         self.status = status
         return trace[:done]
+
+    def _colour(self, white: np.ndarray, a: float) -> np.ndarray:
+        """First-order (AR(1)) noise n_k = a n_{k-1} + sqrt(1 − a²) w_k, unit variance, continuing
+        from the previous chunk: sensor noise that is not white (paper §3.2's explanation of the
+        remaining error)."""
+        out, _ = scipy.signal.lfilter([np.sqrt(1.0 - a * a)], [1.0, -a], white,
+                                          zi=[a * getattr(self, "_coloured_last", self.rng.standard_normal())])
+        self._coloured_last = out[-1]
+        return out
 
     def run(self, duration_s: float) -> dict[str, np.ndarray]:
         """``duration_s`` of simulation as columns (and ``time_s``)."""
