@@ -19,7 +19,7 @@ it as one step of the process noise of eq. 15 and uses that Q; R = σ_v²
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, lru_cache
 
 import numpy as np
 import scipy.linalg
@@ -60,15 +60,10 @@ class ThrustFilterDesign:
         Phi, B_d, Q_d = self.matrices
         return KalmanFilter(Phi, B_d, H, Q_d, [self.measurement_variance_m2], x0, P0)
 
-    @cached_property
+    @property
     def steady_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(K∞ (2,), predicted P∞, corrected P∞) from the discrete Riccati equation (scipy)."""
-        Phi, _, Q_d = self.matrices
-        R = max(self.measurement_variance_m2, 1e-30)
-        P_pred = scipy.linalg.solve_discrete_are(Phi.T, H.T, Q_d, np.array([[R]]))
-        gain = (P_pred @ H.T / (H @ P_pred @ H.T + R)).ravel()
-        P_corr = (np.eye(2) - np.outer(gain, H)) @ P_pred
-        return gain, P_pred, P_corr
+        return tuple(M.copy() for M in _steady_state(self))
 
     def error_poles(self) -> np.ndarray:
         """z-plane poles of the estimation error, eig((I − K∞ H) Φ)."""
@@ -92,3 +87,13 @@ class ThrustFilterDesign:
             P = M @ P @ M.T + R * np.outer(K, K)
             gains[k], covariances[k] = K, P
         return gains, covariances
+
+
+@lru_cache(maxsize=256)
+def _steady_state(design: ThrustFilterDesign):
+    Phi, _, Q_d = design.matrices
+    R = max(design.measurement_variance_m2, 1e-30)
+    P_pred = scipy.linalg.solve_discrete_are(Phi.T, H.T, Q_d, np.array([[R]]))
+    gain = (P_pred @ H.T / (H @ P_pred @ H.T + R)).ravel()
+    P_corr = (np.eye(2) - np.outer(gain, H)) @ P_pred
+    return gain, P_pred, P_corr

@@ -151,6 +151,11 @@ def instability_note(s: ThrustSetup) -> str:
             "(too little damping for this Kp, Ki and current loop).")
 
 
+def one_line(matrix, digits: int) -> str:
+    """A matrix as one line of text, rows in brackets."""
+    return np.array2string(np.asarray(matrix), precision=digits, separator=", ").replace("\n", "")
+
+
 def pairs(values) -> list[list[float]]:
     """Complex numbers as [re, im] pairs for JSON."""
     return [[float(v.real), float(v.imag)] for v in np.sort_complex(np.asarray(values, dtype=complex))]
@@ -280,12 +285,12 @@ class ThrustLiftoff(Exercise):
         net = (b.current_stiffness_n_per_a * s.proportional_a_per_m - b.negative_stiffness_n_per_m) * 1e-6
         d_noise = s.derivative_a_s_per_m * np.sqrt(2.0) * s.sensor_noise_m / T
         readouts = [
-            ("Bias current i0 = |k_x| x0 / k_i", b.bias_current_a, "A"),
+            ("Bias current i0 = −k_x x0 / k_i", b.bias_current_a, "A"),
             ("Force constant k_f = k_i x0² / (4 i0)", b.force_constant_n_m2_per_a2 * 1e3, "mN·m²/A²"),
-            ("Open-loop pole √(|k_x|/m)", b.open_loop_pole_rad_per_s, "rad/s"),
-            ("Net stiffness k_i·Kp − |k_x|", net, "N/µm"),
-            ("Smallest stable Kp (|k_x|/k_i)", b.critical_proportional_gain_a_per_m * MM, "A/mm"),
-            ("Largest closed-loop |z| (with G(s))", float(np.max(np.abs(regulator.poles()))), ""),
+            ("Open-loop pole √(−k_x/m)", b.open_loop_pole_rad_per_s, "rad/s"),
+            ("Net stiffness k_i·Kp + k_x", net, "N/µm"),
+            ("Smallest stable Kp (−k_x/k_i)", b.critical_proportional_gain_a_per_m * MM, "A/mm"),
+            ("Largest closed-loop pole radius in z (with G(s))", float(np.max(np.abs(regulator.poles()))), ""),
             ("Steady std of z, raw PID", std["measured"]["x_measured_m"] * 1e6, "µm"),
             ("Steady std of x̂, filter-PID", std["estimated"]["x_estimated_m"] * 1e6, "µm"),
             ("Accuracy gain std z / std x̂", std["measured"]["x_measured_m"]
@@ -298,14 +303,14 @@ class ThrustLiftoff(Exercise):
             ("Kalman gain K∞ (x ← z)", gain[0], ""),
             ("Kalman gain K∞ (v ← z)", gain[1], "1/s"),
             ("Filter σ of x at steady state", np.sqrt(max(P_corr[0, 0], 0.0)) * 1e6, "µm"),
-            ("Filter error pole |z|", radius, ""),
+            ("Filter error pole radius in z", radius, ""),
             ("Filter error pole damping", damping, ""),
-            ("max |Φ_Taylor − e^{AT}|", float(np.max(np.abs(Phi - Phi_e))), ""),
+            ("Largest entry of Φ (Taylor) − e^(AT)", float(np.max(np.abs(Phi - Phi_e))), ""),
         ]
         notes = [
-            ("Discretisation at T = 0.1 ms, Taylor (eq. 9-11) vs exact e^{AT}: "
-             f"Φ_Taylor = {np.array2string(Phi, precision=8)}, e^(AT) = {np.array2string(Phi_e, precision=8)}; "
-             f"B_d Taylor = {np.array2string(B_d, precision=6)}, exact = {np.array2string(B_e, precision=6)} m/A."),
+            ("Discretisation at T = 0.1 ms, Taylor (eq. 9-11) vs exact: "
+             f"Φ (Taylor) = {one_line(Phi, 9)}, e^(AT) = {one_line(Phi_e, 9)}; "
+             f"B_d (Taylor) = {one_line(B_d, 7)}, exact = {one_line(B_e, 7)} [m/A, m/(A s)]."),
             ("The filter is a linear Kalman filter on the fixed linearisation (Φ, B_d, G_d constant); "
              "eq. 17 is implemented in its standard form (correct the prediction, not the previous estimate)."),
         ]
@@ -317,8 +322,9 @@ class ThrustLiftoff(Exercise):
                  "closed loop with G(s)": to_s(regulator.poles()),
                  "closed loop without G(s)": to_s(no_g.poles()),
                  "filter error": analysis.z_to_s(filter_z, T)}
-        plots = [self._gain_plot(design), self._current_noise_plot(s)]
+        plots = [self._gain_plot(design)]
         yield Analysis(readouts, poles, notes, plots)
+        plots.append(self._current_noise_plot(s))
         runs = {src: liftoff(values, src) for src in SOURCES}
         figures = {src: liftoff_figures(runs[src][0], s.start_position_m) for src in SOURCES}
         lifted = [
@@ -347,11 +353,12 @@ class ThrustLiftoff(Exercise):
 
     @staticmethod
     def _current_noise_plot(s: ThrustSetup) -> Plot:
-        sigmas_um = np.linspace(0.0, 50.0, 26)
-        loops = {src: linear_loop(replace(s, use_estimate=src == "estimated")) for src in SOURCES}
+        sigmas_um = np.linspace(0.0, 50.0, 11)
         series = []
         for src, colour in (("measured", "#1f77b4"), ("estimated", "#d62728")):
-            std = [loops[src].output_std(v * 1e-6, s.force_noise_n)["current_command_a"] for v in sigmas_um]
+            # the filter's R follows σ_v, so each point is its own loop (the raw PID's is linear in σ_v)
+            std = [linear_loop(replace(s, use_estimate=src == "estimated", sensor_noise_m=max(v, 0.1) * 1e-6))
+                   .output_std(v * 1e-6, s.force_noise_n)["current_command_a"] for v in sigmas_um]
             series.append((f"current-command noise, {'raw PID' if src == 'measured' else 'filter-PID'}",
                            np.array(std), colour))
         series.append(("current limit", np.full(sigmas_um.size, s.current_limit_a), "#000000"))

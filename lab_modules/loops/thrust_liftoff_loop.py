@@ -26,6 +26,7 @@ paper's A/mm.  The kernel releases the GIL, so browser tabs run in parallel.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numba
 import numpy as np
@@ -357,13 +358,21 @@ class LinearLoop:
         standard deviations (discrete Lyapunov equation, scipy); inf when unstable."""
         if not self.stable():
             return {name: float("inf") for name in OUTPUTS}
-        W = np.diag([sensor_noise_m**2, force_noise_n**2])
+        per_sensor, per_force = self.unit_variances
+        var = sensor_noise_m**2 * per_sensor + force_noise_n**2 * per_force
+        return {name: float(np.sqrt(max(v, 0.0))) for name, v in zip(OUTPUTS, var)}
+
+    @cached_property
+    def unit_variances(self) -> tuple[np.ndarray, np.ndarray]:
+        """Output variances for unit white sensor noise and unit white force (the two add)."""
         # the states span metres to amperes: balance M first (X = S X' S^T), or the solve is ill-conditioned
         M, (scale, _) = scipy.linalg.matrix_balance(self.M, permute=False, separate=True)
-        N = self.N / scale[:, None]
-        X = scale[:, None] * scipy.linalg.solve_discrete_lyapunov(M, N @ W @ N.T) * scale[None, :]
-        var = np.einsum("ij,jk,ik->i", self.C, X, self.C) + np.einsum("ij,jk,ik->i", self.D, W, self.D)
-        return {name: float(np.sqrt(max(v, 0.0))) for name, v in zip(OUTPUTS, var)}
+        out = []
+        for j in range(self.N.shape[1]):
+            n = self.N[:, j] / scale
+            X = scale[:, None] * scipy.linalg.solve_discrete_lyapunov(M, np.outer(n, n)) * scale[None, :]
+            out.append(np.einsum("ij,jk,ik->i", self.C, X, self.C) + self.D[:, j] ** 2)
+        return out[0], out[1]
 
 
 #: Outputs of ``LinearLoop``: true x, measured z, corrected estimate x̂ [m], current command [A].

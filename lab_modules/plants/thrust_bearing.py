@@ -30,6 +30,7 @@ Not in the paper, chosen here (and stated in the worksheet):
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import control
 import numpy as np
@@ -93,21 +94,14 @@ class ThrustBearing:
         return A, B, G
 
     def taylor_discretisation(self, sample_time_s: float | None = None):
-        """Eq. 9-11: Φ = I + AT + (AT)²/2, B_d = (TI + AT²/2) B, G_d = (TI + AT²/2) G."""
+        """Eq. 9-11: Φ = I + AT + (AT)²/2, B_d = (TI + AT²/2) B, G_d = (TI + AT²/2) G (copies)."""
         T = self.sample_time_s if sample_time_s is None else sample_time_s
-        A, B, G = self.continuous_model()
-        AT = A * T
-        integral = T * np.eye(2) + A * T**2 / 2.0
-        return np.eye(2) + AT + AT @ AT / 2.0, integral @ B, integral @ G
+        return tuple(M.copy() for M in _taylor(self, T))
 
     def exact_discretisation(self, sample_time_s: float | None = None):
-        """Φ = e^{AT}, B_d and G_d = ∫_0^T e^{At} dt (B, G) by one matrix exponential (inputs held)."""
+        """Φ = e^{AT}, B_d and G_d = ∫_0^T e^{At} dt (B, G) by one matrix exponential (inputs held; copies)."""
         T = self.sample_time_s if sample_time_s is None else sample_time_s
-        A, B, G = self.continuous_model()
-        M = np.zeros((4, 4))
-        M[:2, :2], M[:2, 2], M[:2, 3] = A, B, G
-        E = scipy.linalg.expm(M * T)
-        return E[:2, :2], E[:2, 2].copy(), E[:2, 3].copy()
+        return tuple(M.copy() for M in _exact(self, T))
 
     def magnetic_force_n(self, control_current_a, x_m):
         """Eq. 2: f = k_f [(i0 + i_x)²/(x0 − x)² − (i0 − i_x)²/(x0 + x)²], with each coil's
@@ -130,13 +124,36 @@ class ThrustBearing:
                          MIN_MAGNETIC_GAP_M])
 
 
+@lru_cache(maxsize=16)
+def _taylor(bearing: ThrustBearing, T: float):
+    A, B, G = bearing.continuous_model()
+    AT = A * T
+    integral = T * np.eye(2) + A * T**2 / 2.0
+    return np.eye(2) + AT + AT @ AT / 2.0, integral @ B, integral @ G
+
+
+@lru_cache(maxsize=16)
+def _exact(bearing: ThrustBearing, T: float):
+    A, B, G = bearing.continuous_model()
+    M = np.zeros((4, 4))
+    M[:2, :2], M[:2, 2], M[:2, 3] = A, B, G
+    E = scipy.linalg.expm(M * T)
+    return E[:2, :2], E[:2, 2].copy(), E[:2, 3].copy()
+
+
 def current_loop() -> control.TransferFunction:
     """§3.1: G(s) = (0.1034 s² + 2234 s + 7.237e5) / (s² + 2713 s + 7.43e5), command -> coil current."""
     return control.tf(CURRENT_LOOP_NUMERATOR, CURRENT_LOOP_DENOMINATOR)
 
 
 def discrete_current_loop(sample_time_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-    """G(s) as a discrete state space for a held command (ZOH): (A_g, B_g, C_g, D_g)."""
+    """G(s) as a discrete state space for a held command (ZOH): (A_g, B_g, C_g, D_g) (copies)."""
+    A, B, C, D = _discrete_current_loop(sample_time_s)
+    return A.copy(), B.copy(), C.copy(), D
+
+
+@lru_cache(maxsize=16)
+def _discrete_current_loop(sample_time_s: float):
     d = control.c2d(control.ss(current_loop()), sample_time_s, method="zoh")
     return (np.asarray(d.A, dtype=float), np.asarray(d.B, dtype=float).ravel(),
             np.asarray(d.C, dtype=float).ravel(), float(np.asarray(d.D).item()))
