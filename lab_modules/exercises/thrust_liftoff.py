@@ -268,8 +268,8 @@ class ThrustLiftoff(Exercise):
                 "bias_current_a": b.bias_current_a, "force_constant_n_m2_per_a2": b.force_constant_n_m2_per_a2,
                 "pid_units": "e [mm] -> i_c [A]: Kp [A/mm], Ki [A/(mm s)], Kd [A s/mm]"}
 
-    def analyse(self, values: dict):
-        """The linear figures at once, then the noise-free lift-offs."""
+    def analyse(self, values: dict) -> Analysis:
+        """Linear figures (poles, Lyapunov noise), the filter's gain history and the noise-free lift-offs."""
         s = setup(values)
         b = s.bearing
         design = s.design
@@ -322,9 +322,6 @@ class ThrustLiftoff(Exercise):
                  "closed loop with G(s)": to_s(regulator.poles()),
                  "closed loop without G(s)": to_s(no_g.poles()),
                  "filter error": analysis.z_to_s(filter_z, T)}
-        plots = [self._gain_plot(design)]
-        yield Analysis(readouts, poles, notes, plots)
-        plots.append(self._current_noise_plot(s))
         runs = {src: liftoff(values, src) for src in SOURCES}
         figures = {src: liftoff_figures(runs[src][0], s.start_position_m) for src in SOURCES}
         lifted = [
@@ -333,12 +330,22 @@ class ThrustLiftoff(Exercise):
             ("Noise-free peak time", figures["measured"]["peak_time_s"] * 1e3, "ms"),
             ("Noise-free 2 % settling time", figures["measured"]["settling_time_s"], "s"),
         ]
-        t = runs["measured"][0]["time_s"] * 1e3
-        n = min(len(runs["measured"][0]["time_s"]), len(runs["estimated"][0]["time_s"]))
-        lift_plot = Plot("Noise-free lift-off (true position)", "time [ms]", "collar position x [µm]", t[:n], (
-            ("raw-measurement PID", runs["measured"][0]["x_true_m"][:n] * 1e6, "#1f77b4"),
-            ("filter-PID", runs["estimated"][0]["x_true_m"][:n] * 1e6, "#d62728")))
-        yield Analysis(readouts[:6] + lifted + readouts[6:], poles, notes, [lift_plot] + plots)
+        plots = [self._liftoff_plot(runs), self._gain_plot(design), self._current_noise_plot(s)]
+        return Analysis(readouts[:6] + lifted + readouts[6:], poles, notes, plots)
+
+    @staticmethod
+    def _liftoff_plot(runs: dict) -> Plot:
+        """The noise-free lift-offs of both feedback sources (a stopped run leaves a gap)."""
+        t = np.arange(round(LIFTOFF_RUN_S / T)) * T
+        series = []
+        for src, label, colour in (("measured", "raw-measurement PID", "#1f77b4"),
+                                   ("estimated", "filter-PID", "#d62728")):
+            x = np.full(t.size, np.nan)
+            done = runs[src][0]["x_true_m"][: t.size]
+            x[: done.size] = done * 1e6
+            series.append((label, x, colour))
+        return Plot("Noise-free lift-off (true position)", "time [ms]", "collar position x [µm]", t * 1e3,
+                    tuple(series))
 
     @staticmethod
     def _gain_plot(design) -> Plot:
