@@ -45,6 +45,7 @@ from lab_modules.loops.thrust_liftoff_loop import (
 )
 from lab_modules.parameters import Parameter
 from lab_modules.plants.thrust_bearing import TABLE_1
+from lab_modules.scenes.thrust_bearing import ThrustBearingScene
 
 T = TABLE_1.sample_time_s
 MM = 1e-3
@@ -386,6 +387,10 @@ class ThrustLiftoff(Exercise):
         simulation.explanation = instability_note(s)
         simulation.relaunch_s = values["relaunch_s"]
         return simulation
+
+    def scene(self, values: dict) -> ThrustBearingScene:
+        """The collar between its stator halves, gaps and motion drawn ×40."""
+        return ThrustBearingScene(values)
 
     def live_readouts(self, trace: dict[str, np.ndarray]) -> list[tuple[str, float, str]]:
         error, sigma = trace["estimation_error_m"], trace["x_sigma_m"]
