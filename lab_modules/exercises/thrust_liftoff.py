@@ -37,6 +37,7 @@ from lab_modules import analysis
 from lab_modules.claims import Claim
 from lab_modules.estimators.thrust_kalman import PAPER_Q_N2
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises.kalman_noise import pairs
 from lab_modules.loops.thrust_liftoff_loop import (
     ThrustSetup,
     ThrustSimulation,
@@ -155,11 +156,6 @@ def instability_note(s: ThrustSetup) -> str:
 def one_line(matrix, digits: int) -> str:
     """A matrix as one line of text, rows in brackets."""
     return np.array2string(np.asarray(matrix), precision=digits, separator=", ").replace("\n", "")
-
-
-def pairs(values) -> list[list[float]]:
-    """Complex numbers as [re, im] pairs for JSON."""
-    return [[float(v.real), float(v.imag)] for v in np.sort_complex(np.asarray(values, dtype=complex))]
 
 
 def to_s(poles_z) -> np.ndarray:
