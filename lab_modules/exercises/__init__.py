@@ -182,6 +182,7 @@ MODULES = (
     "sensor_placement",
     "maglev_tracking",
     "maglev_tuning",
+    "thrust_liftoff",
 )
 
 
