@@ -177,7 +177,6 @@ def run_periods(first_period, n_periods, flux, constants, setup, rng_state, out,
             fill_normal(rng_state, noise)
         else:
             noise[:] = 0.0
-        true_sum = 0.0
         l_sum = 0.0
         l_1_sum = 0.0
         l_2_sum = 0.0
@@ -303,6 +302,9 @@ class SelfSensingLoop:
         self.period += n_periods
         return out, raw
 
-    def times_s(self, first: int, count: int) -> np.ndarray:
-        """Start times of periods first .. first + count − 1."""
-        return (first + np.arange(count)) * self.setup.period_s
+    def retuned(self, setup: SelfSensingSetup) -> SelfSensingLoop:
+        """The same run (period, coil flux, noise stream) carried on with a new set-up of the
+        same sample time and period length."""
+        loop = SelfSensingLoop(setup)
+        loop.period, loop.flux, loop.rng_state = self.period, self.flux, self.rng_state
+        return loop
