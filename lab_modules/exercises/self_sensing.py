@@ -40,6 +40,7 @@ from lab_modules.loops.self_sensing_loop import (
 )
 from lab_modules.parameters import Parameter
 from lab_modules.plants.self_sensing_ball import RIG
+from lab_modules.scenes.self_sensing import SelfSensingScene
 
 from . import Analysis, Chart, Exercise, Plot, Series
 
@@ -383,6 +384,12 @@ class SelfSensing(Exercise):
 
     def simulation(self, values: dict) -> SelfSensingSimulation:
         return SelfSensingSimulation(values)
+
+    def scene(self, values: dict) -> SelfSensingScene:
+        """Core, coil and the ball at its true gap; the estimate (error magnified) as an outline."""
+        return SelfSensingScene({"gap": "gap_true_m", "estimate": "gap_shown_m", "sigma": "sigma_gap_shown_m",
+                                 "current": "current_mean_true_a", "inductance": "inductance_true_h",
+                                 "estimated_inductance": "inductance_mean_h"})
 
     def retune(self, simulation: SelfSensingSimulation, values: dict) -> SelfSensingSimulation:
         """Keep the ball's motion, the coil's flux and the noise stream across slider moves;
