@@ -101,7 +101,7 @@ class SelfSensingScene:
             lines = [f"gap s = {gap * 1e3:.3f} mm (grey ball)",
                      f"estimate ŝ = {estimate * 1e3:.3f} mm (red), ŝ − s = {(estimate - gap) * 1e6:.1f} µm",
                      f"σ̂(ŝ) = {sigma * 1e6:.1f} µm",
-                     f"L = {latest.get(c['inductance'], float('nan')) * 1e3:.3f} mH, "
-                     f"L̄ = {latest.get(c['estimated_inductance'], float('nan')) * 1e3:.3f} mH",
+                     (f"L = {latest.get(c['inductance'], float('nan')) * 1e3:.3f} mH, "
+                     f"L̄ = {latest.get(c['estimated_inductance'], float('nan')) * 1e3:.3f} mH"),
                      f"mean coil current {current:.3f} A"]
             set_if_changed(self.shown, h["legend"], "text", "\n".join(lines))
