@@ -246,11 +246,12 @@ IDEAL = {"current_gain": 1.0, "voltage_gain": 1.0, "current_offset_a": 0.0, "vol
 
 def histogram(normalised: np.ndarray) -> Plot:
     """(L̄ − L)/σ̂ against the standard normal density."""
+    normalised = normalised[np.isfinite(normalised)]
     edges = np.linspace(-4.0, 4.0, 33)
     counts, _ = np.histogram(normalised, bins=edges)
     centres = 0.5 * (edges[1:] + edges[:-1])
-    density = counts / (len(normalised) * (edges[1] - edges[0]))
-    return Plot(f"Monte-Carlo: (L̄ − L)/σ̂(L̄) over {len(normalised)} periods against N(0, 1)",
+    density = counts / (max(len(normalised), 1) * (edges[1] - edges[0]))
+    return Plot("Monte-Carlo at gap 1: (L̄ − L)/σ̂(L̄) per PWM period against N(0, 1)",
                 "normalised error (L̄ − L)/σ̂ [1]", "density [1]", centres,
                 (("histogram", density, "#1f77b4"),
                  ("N(0, 1)", np.exp(-0.5 * centres**2) / math.sqrt(2 * math.pi), "#d62728")))
@@ -338,7 +339,7 @@ class SelfSensing(Exercise):
                  "histogram follows.")]
         plots = self.ripple_plots(values)
         yield Analysis(readouts, poles, notes, plots)
-        normalised, rows_all = [], []
+        rows_all = []
         for k in range(4):
             rows = stationary(values, "gap_1", periods=1250, seed_offset=1000 + k)
             rows_all.append(rows)
@@ -350,7 +351,8 @@ class SelfSensing(Exercise):
             ("Monte-Carlo std / predicted σ̂(L̄) at gap 1 (4 seeds × 1250 periods)",
              st["monte_carlo_to_predicted_ratio"], ""),
             ("Share inside ±3σ̂(L̄) at gap 1 (Monte-Carlo)", st["within_3sigma_percent"], "%")]
-        yield Analysis(readouts, poles, notes[:0], plots + [histogram(normalised)])
+        yield Analysis(readouts, poles, ["Monte-Carlo: 4 seeds × 1250 PWM periods at gap 1."],
+                       plots + [histogram(normalised)])
 
     def ripple_plots(self, values: dict) -> list[Plot]:
         """Two PWM periods at gap 1: true and measured current, the fitted lines over the windows,
@@ -361,7 +363,8 @@ class SelfSensing(Exercise):
         n = s.samples_per_period
         rows, raw = loop.run(2, raw_samples=2 * n)
         t_us = (raw[:, 0] - raw[0, 0]) * 1e6
-        fits = [np.full(2 * n, np.nan), np.full(2 * n, np.nan)]
+        # one series per window: the chart would join the NaN gaps between two windows of a series
+        fits = []
         r_hat = s.resistance_ratio * RIG.coil_resistance_ohm * (-1.0 if s.printed_eq7 else 1.0)
         dof = "M + d" if s.printed_dof else "M-d"
         for p in range(2):
@@ -371,15 +374,17 @@ class SelfSensing(Exercise):
                                                    (n_on + s.trim_samples, n - s.trim_samples - 1))):
                 result = fit(current, voltage, start, stop, r_hat, s.sample_time_s, dof)
                 flux = np.concatenate([[0.0], np.cumsum(voltage[start:stop] - r_hat * current[start:stop])])
-                fits[phase][p * n + start:p * n + stop + 1] = (result["initial_current_a"]
-                                                               + s.sample_time_s / result["inductance_h"] * flux)
+                line = np.full(2 * n, np.nan)
+                line[p * n + start:p * n + stop + 1] = (result["initial_current_a"]
+                                                        + s.sample_time_s / result["inductance_h"] * flux)
+                fits.append((f"fit {'I' * (phase + 1)}, period {p + 1}", line,
+                             "#ff7f0e" if phase == 0 else "#2ca02c"))
         return [
             Plot(f"Ripple of two PWM periods at {s.gap_1_m * 1e3:g} mm: fitted lines over the windows "
                  "(eq. 9-10)", "time [µs]", "current [A]", t_us,
-                 (("measured i_m", raw[:, 2], "#c0c0c0"), ("true i", raw[:, 1], "#000000"),
-                  ("fit, phase I", fits[0], "#ff7f0e"), ("fit, phase II", fits[1], "#2ca02c"))),
+                 (("measured i_m", raw[:, 2], "#c0c0c0"), ("true i", raw[:, 1], "#000000"), *fits)),
             Plot("Bridge voltage of the same two periods", "time [µs]", "voltage [V]", t_us,
-                 (("measured v_m", raw[:, 3], "#9467bd"), ("applied v", raw[:, 4], "#000000"))),
+                 (("applied v", raw[:, 4], "#000000"), ("measured v_m", raw[:, 3], "#9467bd"))),
         ]
 
     def simulation(self, values: dict) -> SelfSensingSimulation:
