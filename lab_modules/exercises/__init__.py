@@ -183,6 +183,7 @@ MODULES = (
     "maglev_tracking",
     "maglev_tuning",
     "thrust_liftoff",
+    "self_sensing",
 )
 
 
