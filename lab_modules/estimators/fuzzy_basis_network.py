@@ -126,3 +126,37 @@ def evaluate(current_a, position_m, centres, weights, widths):
     if den <= 1e-300:
         return 0.0
     return num / den
+
+
+TEST_POINTS = 41           # the test grid: 41 × 41 operating points
+TRAINING_POINTS = 20       # the training grid: 20 × 20 (between and on the nodes)
+
+
+def test_grid(n: int = TEST_POINTS) -> tuple[np.ndarray, np.ndarray]:
+    return training_grid(n)
+
+
+@dataclass
+class TrainedPair:
+    """The two networks (k_i [N/A], k_s [N/m]) and their RMSE histories."""
+
+    ki: FuzzyBasisNetwork
+    ks: FuzzyBasisNetwork
+    ki_untrained: FuzzyBasisNetwork
+    ks_untrained: FuzzyBasisNetwork
+    ki_history: list[float]
+    ks_history: list[float]
+
+
+def stiffness_networks(ki_table: np.ndarray, ks_table: np.ndarray, ki_train: np.ndarray, ks_train: np.ndarray,
+                       epochs: int, rate: float, initial_width: float = INITIAL_WIDTH,
+                       train_weights: bool = False) -> TrainedPair:
+    """Networks from the node tables, widths trained on the LSM factors ``*_train``
+    of ``training_grid()`` (``epochs`` steps of steepest descent)."""
+    currents, positions = training_grid()
+    ki = FuzzyBasisNetwork.from_table(ki_table, initial_width)
+    ks = FuzzyBasisNetwork.from_table(ks_table, initial_width)
+    before = (ki.copy(), ks.copy())
+    ki_history = ki.train(currents, positions, ki_train, epochs, rate, train_weights)
+    ks_history = ks.train(currents, positions, ks_train, epochs, rate, train_weights)
+    return TrainedPair(ki, ks, *before, ki_history, ks_history)

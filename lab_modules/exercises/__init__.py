@@ -153,6 +153,7 @@ MODULES = (
     "sensor_placement",
     "maglev_tracking",
     "maglev_tuning",
+    "stiffness_map",
 )
 
 
