@@ -295,7 +295,7 @@ def plane_plot(values: dict, ki_node: float, ks_node: float) -> Plot:
     i_node, x_node = node(values)
     i = np.linspace(-1.5, 1.5, 121)
     force = AXIAL.force_n(i, x_node)
-    kit, kst = AXIAL.tangent_factors(i_node, x_node)
+    kit, _ = AXIAL.tangent_factors(i_node, x_node)
     f_node = float(AXIAL.force_n(i_node, x_node))
     fit_label = "fitted plane, no constant (eq. 26)" if values["fit"] == "no_intercept" else "fitted plane with constant"
     fitted = ki_node * i + ks_node * x_node
@@ -320,7 +320,7 @@ def section_plots(values: dict, pair: TrainedPair) -> list[Plot]:
             ("k_s", "N/mm", 1 / N_PER_MM, ks_lsm, kst, pair.ks, pair.ks_untrained)):
         plots.append(Plot(f"{label} over the current at x = {x_node * 1e3:g} mm (Figs. 13-14)",
                           "control current i [A]", f"{label} [{unit}]", i,
-                          ((f"LSM (target)", lsm * scale, "#1f77b4"), ("tangent", tangent * scale, "#7f7f7f"),
+                          (("LSM (target)", lsm * scale, "#1f77b4"), ("tangent", tangent * scale, "#7f7f7f"),
                            ("FBFNN untrained", untrained.predict(i, x) * scale, "#ff7f0e"),
                            ("FBFNN trained", trained.predict(i, x) * scale, "#d62728"))))
     return plots
