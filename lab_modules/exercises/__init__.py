@@ -154,6 +154,7 @@ MODULES = (
     "maglev_tracking",
     "maglev_tuning",
     "stiffness_map",
+    "adaptive_filter",
 )
 
 

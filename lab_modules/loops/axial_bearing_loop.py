@@ -100,6 +100,7 @@ class LoopSetup:
     adaline_rate: float = 0.0174              # η in (mm²/A²)²·A²/(N·mm²)... see adaline_rate_note
     adaline_initial: float = 5.0              # k̂_Magnet at the start [N·mm²/A²]
     force_noise_n: float = 0.0                # σ of the measured magnet force for the ADALINE
+    plant_force_walk_n2: float = 0.0          # a random-walk part of F_St in the plant (variance per sample)
     k_magnet: float = AXIAL.k_magnet_n_m2_per_a2
     filter_k_magnet: float = AXIAL.k_magnet_n_m2_per_a2   # what the filters' models assume
     stencil_a: float = PAPER_STENCIL_A
@@ -122,8 +123,8 @@ class LoopSetup:
 
 
 # state vector layout
-(S_T, S_X, S_V, S_XM, S_INTEGRAL, S_DERIV, S_PREV_MEAS, S_REF, S_ADALINE, S_STOPPED, S_CURRENT) = range(11)
-N_LOOP_STATE = 11
+(S_T, S_X, S_V, S_XM, S_INTEGRAL, S_DERIV, S_PREV_MEAS, S_REF, S_ADALINE, S_STOPPED, S_CURRENT, S_WALK) = range(12)
+N_LOOP_STATE = 12
 
 
 @njit(cache=True, nogil=True)
@@ -174,6 +175,8 @@ def run(n_steps, state, filter_z, filter_P, physics, schedule, period, load_ramp
         if load_ramp > 0.0 and tau - schedule[seg, 0] < load_ramp:
             load = previous + (load - previous) * (tau - schedule[seg, 0]) / load_ramp
         k_magnet = k_magnet_nominal * k_factor
+        load += state[S_WALK]
+        state[S_WALK] += noise[k, 3]
         x, v, xm = state[S_X], state[S_V], state[S_XM]
         y = xm + noise[k, 0]
         x_meas = y / sensor_gain
@@ -305,7 +308,9 @@ class LoopSimulation:
             self.rng.normal(0.0, np.sqrt(self.setup.var_sensor_v2), n_steps),
             self.rng.normal(0.0, np.sqrt(self.setup.var_process_a2), n_steps),
             self.rng.normal(0.0, self.setup.force_noise_n, n_steps) if self.setup.force_noise_n > 0
-            else np.zeros(n_steps)])
+            else np.zeros(n_steps),
+            self.rng.normal(0.0, np.sqrt(self.setup.plant_force_walk_n2), n_steps)
+            if self.setup.plant_force_walk_n2 > 0 else np.zeros(n_steps)])
         out = np.empty((n_steps, 1 + len(COLUMNS)))
         n = run(n_steps, self.state, self.filter_z, self.filter_P, self.physics, self.schedule,
                 self.setup.period_s, self.setup.load_ramp_s, self.controller, self.setup.k_magnet, self.stencil,
