@@ -288,26 +288,20 @@ class AdaptiveFilter(Exercise):
     default_duration_s = PERIOD_S
     claims = CLAIMS
     charts = (
-        Chart("Disturbance force F_St", "N", (
+        Chart("Disturbance force F_St (±3σ: scheduled filter)", "N", (
             Series("true", "disturbance_n", 1.0, "#1f77b4"),
-            *(Series(LABELS[f], f"{f}_force_n", 1.0, COLORS[f]) for f in FILTERS)),
+            *(Series(LABELS[f], f"{f}_force_n", 1.0, COLORS[f]) for f in ("fixed", "fbfnn"))),
             band=("fbfnn_force_n", "fbfnn_force_sigma_n")),
-        Chart("Rotor position", "µm", (
+        Chart("Rotor position (±3σ: scheduled filter)", "µm", (
             Series("measured (delayed)", "x_measured_m", 1e6, "#b0b0b0"),
             Series("true", "x_true_m", 1e6, "#1f77b4"),
-            Series(LABELS["fixed"], "fixed_x_m", 1e6, COLORS["fixed"]),
             Series(LABELS["fbfnn"], "fbfnn_x_m", 1e6, COLORS["fbfnn"])),
             band=("fbfnn_x_m", "fbfnn_x_sigma_m")),
         Chart("Position estimate error x̂ - x", "µm", tuple(
             Series(LABELS[f], f"{f}_x_error_m", 1e6, COLORS[f]) for f in ("fixed", "fbfnn"))),
-        Chart("k_i at the operating point", "N/A", (
-            Series("tangent (true)", "ki_tangent_n_per_a", 1.0, "#1f77b4"),
-            Series("FBFNN", "ki_fbfnn_n_per_a", 1.0, COLORS["fbfnn"]),
-            Series("exact LSM", "ki_lsm_n_per_a", 1.0, COLORS["lsm"]))),
         Chart("k_s at the operating point", "N/mm", (
             Series("tangent (true)", "ks_tangent_n_per_m", 1 / N_PER_MM, "#1f77b4"),
-            Series("FBFNN", "ks_fbfnn_n_per_m", 1 / N_PER_MM, COLORS["fbfnn"]),
-            Series("exact LSM", "ks_lsm_n_per_m", 1 / N_PER_MM, COLORS["lsm"]))),
+            Series("FBFNN", "ks_fbfnn_n_per_m", 1 / N_PER_MM, COLORS["fbfnn"]))),
         Chart("Coil control current", "A", (Series("i", "current_a", 1.0, "#2ca02c"),)),
     )
 

@@ -201,6 +201,14 @@ def time_to_within(t: np.ndarray, estimate: np.ndarray, target: float, start_s: 
     return 1e3 * (settled - start_s)
 
 
+def adaline_pole(values: dict) -> np.ndarray:
+    """The LMS weight error decays by (1 - η φ²) per sample; at the rotor's weight (φ = m g / k_M) as a
+    continuous-equivalent pole [rad/s] (a factor ≤ 0 has no such pole: the rule then oscillates or diverges)."""
+    phi = AXIAL.weight_n / K_MAGNET_PAPER                        # A²/mm²
+    factor = 1.0 - values["adaline_rate"] * phi**2
+    return np.array([np.log(factor) / T if factor > 0 else -np.pi / T])
+
+
 def adaline_run(values: dict, axis: str | None = None) -> dict:
     """One period: from the start and after the k_Magnet step."""
     simulation = LoopSimulation(loop_setup(values, networks(values), axis=axis), seed=int(values["seed"]))
@@ -451,7 +459,8 @@ class StiffnessMap(Exercise):
         ]
         plots = [*table_plots(ki, ks_mm), plane_plot(values, float(ki[row, col]), float(ks_mm[row, col]) * N_PER_MM),
                  bias_variance_plot(values)]
-        yield Analysis(list(readouts), {}, ["FBFNN training and ADALINE run follow …"], list(plots))
+        poles = {"ADALINE weight error (rotor's weight)": adaline_pole(values)}
+        yield Analysis(list(readouts), poles, ["FBFNN training and ADALINE run follow …"], list(plots))
         pair = networks(values)
         rmse_before, rmse_after = test_rmse(values, pair.ki_untrained, pair.ks_untrained), \
             test_rmse(values, pair.ki, pair.ks)
@@ -467,7 +476,7 @@ class StiffnessMap(Exercise):
         ]
         notes = [f"ADALINE run: {run['status']}",
                  "Table 4's entry at x = 0.5 mm, i = 0.75 A prints 8.45, its mirror 8.47: compared within ±0.03."]
-        yield Analysis(readouts, {}, notes, [*plots, *section_plots(values, pair), training_plot(pair),
+        yield Analysis(readouts, poles, notes, [*plots, *section_plots(values, pair), training_plot(pair),
                                              adaline_plot(run, zero)])
 
     def simulation(self, values: dict) -> StiffnessMapSimulation:
