@@ -201,21 +201,8 @@ def statistics(trace: np.ndarray) -> dict:
     return out
 
 
-def filter_poles(values: dict) -> dict[str, np.ndarray]:
-    """Continuous-equivalent poles of the steady-state filter error at the centre and at point 1 (fixed model)."""
-    physics = setup(values).physics()
-    A, B, Q = np.zeros((4, 4)), np.zeros((4, 2)), np.zeros((4, 4))
-    H = np.array([[0.0, 0.0, 0.0, 1.0]])
-    k_i, k_s = AXIAL.centre_factors()
-    model_matrices(k_i, k_s, physics, A, B)
-    process_noise(physics, B, Q)
-    P = scipy.linalg.solve_discrete_are(A.T, H.T, Q, np.array([[values["var_sensor_v2"]]]))
-    K = P @ H.T / (H @ P @ H.T + values["var_sensor_v2"])
-    return {"filter error (centre model)": analysis.z_to_s(np.linalg.eigvals(A - A @ K @ H), T)}
-
-
-def steady_sigma_um(values: dict) -> float:
-    """σ_x of the fixed filter's steady state (a-posteriori P₁₁ from the Riccati equation) [µm]."""
+def steady_filter(values: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(A, H, K, P⁻) of the fixed filter in steady state: the a-priori P⁻ from scipy's Riccati solver."""
     physics = setup(values).physics()
     A, B, Q = np.zeros((4, 4)), np.zeros((4, 2)), np.zeros((4, 4))
     H = np.array([[0.0, 0.0, 0.0, 1.0]])
@@ -223,7 +210,18 @@ def steady_sigma_um(values: dict) -> float:
     process_noise(physics, B, Q)
     R = values["var_sensor_v2"]
     P = scipy.linalg.solve_discrete_are(A.T, H.T, Q, np.array([[R]]))
-    K = P @ H.T / (H @ P @ H.T + R)
+    return A, H, P @ H.T / (H @ P @ H.T + R), P
+
+
+def filter_poles(values: dict) -> dict[str, np.ndarray]:
+    """Continuous-equivalent poles of the steady-state filter error (fixed, centre model)."""
+    A, H, K, _ = steady_filter(values)
+    return {"filter error (centre model)": analysis.z_to_s(np.linalg.eigvals(A - A @ K @ H), T)}
+
+
+def steady_sigma_um(values: dict) -> float:
+    """σ_x of the fixed filter's steady state (a-posteriori P₁₁) [µm]."""
+    _, H, K, P = steady_filter(values)
     return 1e6 * float(np.sqrt(((np.eye(4) - K @ H) @ P)[0, 0]))
 
 
