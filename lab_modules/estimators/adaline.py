@@ -10,7 +10,8 @@ Two uses in the paper (their regressors did not survive the text; reconstructed)
 
 (a) MISO: the rotor's motion x(k+1) - 2x(k) + x(k-1) = T²/m (F_Magnet - m g + F_St)
     (eq. 15-16); with the kinematic weights known, the one adapted weight is
-    w₄ = F_Magnet(k), input T²/m.  ``miso_force_step``.
+    w₄ = F_Magnet(k), input T²/m.  Not built in the lab: the SISO ADALINE below
+    learns from a measured force instead (see ``loops.axial_bearing_loop``).
 (b) SISO: F_Magnet = k_Magnet · φ(i, x), φ = (i0+i)²/(s0-x)² - (i0-i)²/(s0+x)²
     (eq. 1); the weight is k_Magnet.  ``siso_step``; the lab works in the
     paper's units (φ in A²/mm², k_Magnet in N·mm²/A²) so that η is a plain number.
@@ -30,12 +31,3 @@ def siso_step(weight, regressor, target, rate):
     error = target - weight * regressor
     return weight + rate * error * regressor
 
-
-@njit(cache=True, nogil=True)
-def miso_force_step(force_weight, x_next, x_now, x_prev, mass_kg, sample_time_s, weight_n, rate):
-    """One LMS step of the MISO ADALINE (a): the adapted weight is F_Magnet [N]
-    (F_St = 0 during identification, as in the paper's Fig. 11); input T²/m."""
-    regressor = sample_time_s**2 / mass_kg
-    target = x_next - 2.0 * x_now + x_prev + regressor * weight_n
-    error = target - force_weight * regressor
-    return force_weight + rate * error * regressor
