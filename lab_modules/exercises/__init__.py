@@ -184,6 +184,8 @@ MODULES = (
     "maglev_tuning",
     "thrust_liftoff",
     "self_sensing",
+    "stiffness_map",
+    "adaptive_filter",
 )
 
 
