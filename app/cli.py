@@ -7,6 +7,8 @@
     python -m app run --code KN-7Q3M [--set N=V ...] [--json]   a saved experiment, headless
     python -m app save NAME [--set N=V ...] [--data FILE]        save an experiment, print its code
     python -m app bench [--json] [--browser]   throughput benchmark; --browser: slider-to-readout latency
+    python -m app reproduce [--json] [--quick] [--html DIR] [--exercise NAME ...]
+                                               every paper claim measured; exit 1 if one fails
 
 Bad input (unknown exercise or parameter, non-numbers, NaN, out of range, a
 busy port, an unknown code) exits with status 2 and one line naming the
@@ -81,6 +83,21 @@ def _parser() -> argparse.ArgumentParser:
     bench.add_argument("--seconds", type=float, default=2.0, help="simulated seconds per measurement")
     bench.add_argument("--browser", action="store_true",
                        help="instead: slider-to-readout latency in headless Chromium (needs the test extras)")
+    reproduce = sub.add_parser(
+        "reproduce", help="measure every exercise's paper claims and print paper vs lab",
+        description="Measure every exercise's paper claims (the `claims` of each exercise file) and print "
+                    "paper vs lab with the range the lab holds itself to. Exit status 1 if a claim fails. "
+                    "Default: each claim on seeds 0 to 4 (it must hold on all; exercises without a seed "
+                    "run once). --quick: seed 0 only, each claim at its own settings and run length, as the "
+                    "test suite checks it (under 3 minutes on 2 cores).")
+    reproduce.add_argument("--json", action="store_true", help="print JSON")
+    reproduce.add_argument("--quick", action="store_true",
+                           help="seed 0 only (default: seeds 0-4; a claim must hold on each)")
+    reproduce.add_argument("--html", default=None, metavar="DIR",
+                           help="also write DIR/index.html: the table and the figures behind each exercise's "
+                                "claims (PNG embedded)")
+    reproduce.add_argument("--exercise", action="append", default=[], metavar="NAME", dest="only",
+                           help="only this exercise (repeatable; default: all)")
     return parser
 
 
@@ -245,6 +262,9 @@ def main(argv: list[str] | None = None) -> int:
             return command_list(args.json)
         if args.command == "run":
             return command_run(args)
+        if args.command == "reproduce":
+            from app.reproduce import main as reproduce_main
+            return reproduce_main(args.json, args.quick, args.html, args.only)
         if args.command == "save":
             return command_save(args)
         if args.command == "bench" and args.browser:

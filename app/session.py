@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 import viser
 
+from app import worksheets
 from app.access import token_matches
 from app.store import Store, StoreError
 from app.traffic import callback
@@ -435,9 +436,9 @@ class LabSession:
                     self.plots.append(gui.add_uplot(data, **options, aspect=2.0))
         else:
             self.plots = []
-        worksheet = (STATIC / "worksheets" / self.exercise.worksheet).read_text(encoding="utf-8")
+        worksheet = worksheets.current(self.exercise)    # claims table filled in as it is measured
         with panel.add_tab("Worksheet", viser.Icon.NOTEBOOK):
-            gui.add_markdown(worksheet)
+            sheets = [gui.add_markdown(worksheet)]
         gui.main_panel.dock_left()                    # both panels docked, the 3D view in between
         gui.main_panel.set_width(CONTROL_WIDTH_PX)
         panel.dock_right()
@@ -445,12 +446,19 @@ class LabSession:
         # The worksheet can also take the 3D view's place, beside the charts (self-paced work).
         beside = gui.add_panel(visible=self.worksheet_beside)
         with beside.add_tab("Worksheet", viser.Icon.NOTEBOOK):
-            gui.add_markdown(worksheet)
+            sheets.append(gui.add_markdown(worksheet))
         beside.float(x=0, y=0, width=CANVAS_PX[0], height=CANVAS_PX[1])   # over the 3D view, docks untouched
 
         def show_beside(_event) -> None:
             self.worksheet_beside = beside.visible = toggle.value
         toggle.on_update(self._on("beside", lambda: show_beside(None)))
+
+        def show_measured(sheet: str, generation: int = self.generation) -> None:
+            with self.gui_lock:
+                if self._current(generation):
+                    for handle in sheets:
+                        handle.content = sheet
+        worksheets.when_measured(self.exercise, show_measured)
 
     def _add_input(self, parameter: Parameter):
         gui, value = self.client.gui, self.values[parameter.name]

@@ -30,6 +30,7 @@ from dataclasses import replace
 import numpy as np
 
 from lab_modules import analysis
+from lab_modules.claims import Claim
 from lab_modules.controllers.lqr import (
     PAPER_LQG,
     PAPER_LQR_WEIGHTS,
@@ -284,6 +285,17 @@ class LqgVsPid(Exercise):
     worksheet = "lqg_vs_pid.md"
     parameters = PARAMETERS
     default_duration_s = 1.0
+    #: With the paper's printed gains (eq. 22); step tests are noise-free, so a short run does.
+    claims = (
+        Claim("paper 000 §IV, Fig. 7", "dominant real part, filter vs LQG regulator", "more than 5 ×",
+              "dominant_pole_ratio_filter_to_lqg", (5, None), "×", duration_s=0.2),
+        Claim("paper 000 §IV, Fig. 8", "LQG peak control current, 50 µm reference step", "far below the PID's",
+              "peak_current_lqg_a", (None, 1.0), "A", duration_s=0.2),
+        Claim("paper 000 §IV, Fig. 8", "PID peak control current, 50 µm reference step", "far above the LQG's",
+              "peak_current_pid_a", (5.0, None), "A", duration_s=0.2),
+        Claim("paper 000 §IV, Fig. 8", "PID overshoot, 50 µm reference step", "large, long transient",
+              "overshoot_pid_percent", (20, None), "%", duration_s=0.2),
+    )
     charts = (
         Chart("Rotor position", "µm", (
             Series("reference", "reference_m", 1e6, COLORS["reference"]),
@@ -349,6 +361,11 @@ class LqgVsPid(Exercise):
     def retune(self, simulation: SideBySide, values: dict) -> SideBySide:
         """A slider move changes the running experiment instead of restarting it."""
         return simulation.retuned(setups(values))
+
+    def report_figures(self, values: dict) -> list:
+        """Figs. 8-9: both loops after the reference step and after the disturbance step."""
+        from lab_modules.exercises._figures import plot_figure
+        return [plot_figure(plot) for plot in step_plots(step_tests(setups(values), values), values)]
 
     def live_readouts(self, trace: dict[str, np.ndarray]) -> list[tuple[str, float, str]]:
         return [(f"{name}: RMS control current, this run", rms(trace[f"current_a_{name.lower()}"]), "A")
