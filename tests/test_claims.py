@@ -6,6 +6,7 @@ whole file costs one headless run per distinct setting."""
 
 from __future__ import annotations
 
+import html
 import json
 from pathlib import Path
 
@@ -97,7 +98,7 @@ def test_reproduce_prints_json_and_writes_the_report(tmp_path, capsys):
     assert len(rows) == len(EXERCISES["lqg_vs_pid"].claims)
     assert all(row["status"] in ("pass", "deviation (holds)") for row in rows)
     page = (tmp_path / "index.html").read_text(encoding="utf-8")
-    assert page.count("data:image/png;base64,") >= 2 and rows[0]["quantity"] in page
+    assert page.count("data:image/png;base64,") >= 2 and html.escape(rows[0]["quantity"]) in page
 
 
 @pytest.mark.parametrize("argv", [["reproduce", "--exercise", "no_such_exercise"],

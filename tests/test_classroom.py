@@ -117,6 +117,10 @@ def test_churn_leaks_no_threads_or_memory(tmp_path):
         async def scenario():
             warm = await _lab_tab(port)                    # compile and cache everything once
             await warm.close()
+            for _ in range(10):                            # and let the allocator reach its working set
+                tab = await RawTab().connect(url(port))
+                await tab.wait_for(lambda t=tab: t.find("GuiUplotMessage", SCOPE), 60)
+                await tab.close()
             await asyncio.sleep(3)
             threads0, rss0 = process_threads(server.pid), process_rss_mb(server.pid)
             for cycle in range(200):
