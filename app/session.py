@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import viser
 
+from app import layout, scope
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, registry
 from lab_modules.parameters import Parameter, ParameterError
 from lab_modules.scenes.bearing import CANVAS_PX
@@ -42,6 +43,8 @@ SCOPE_ASPECT = 2.2                # width / height of a scope chart
 SETTLE_BEFORE_REMOVAL_S = 0.3     # an exercise switch waits this long between the last chart update and removal
 LOG_SCALE = {"distr": 3, "log": 10}   # uPlot's logarithmic scale
 LOG_DECADES = 4                   # a logarithmic plot shows at most this many decades
+PANEL_TABS = (("Scope", viser.Icon.WAVE_SINE), ("Pole map", viser.Icon.CHART_DOTS),
+              ("Analysis", viser.Icon.CHART_LINE), ("Worksheet", viser.Icon.NOTEBOOK))
 LIGHT_DAMPING = 0.3               # poles below this damping always belong to the dominant view
 
 
@@ -117,7 +120,8 @@ class LabSession:
         self.client.flush()
         time.sleep(SETTLE_BEFORE_REMOVAL_S)
         with self.gui_lock:
-            self.client.gui.reset()
+            self._clear_notification()                # the old exercise's stop message goes with it
+            layout.clear(self.client.gui, keep=(self.panel, self.beside, *self.tabs.values()))   # docks stay
             self.client.scene.reset()
             self._start(chosen)
 
@@ -168,40 +172,56 @@ class LabSession:
         self.error = gui.add_markdown("")
 
         first = next(_analyses(self.exercise.analyse(dict(self.values))))
-        self.panel = panel = gui.add_panel()
-        with panel.add_tab("Scope", viser.Icon.WAVE_SINE):
+        if getattr(self, "panel", None) is None:      # docked once per tab (see app/layout.py)
+            self.panel = gui.add_panel()
+            self.tabs = {name: self.panel.add_tab(name, icon) for name, icon in PANEL_TABS}
+            gui.main_panel.dock_left()                # both panels docked, the 3D view in between
+            gui.main_panel.set_width(CONTROL_WIDTH_PX)
+            self.panel.dock_right()
+            self.panel.set_width(PANEL_WIDTH_PX)
+            # The worksheet can also take the 3D view's place, beside the charts (self-paced work).
+            self.beside = gui.add_panel(visible=self.worksheet_beside)
+            self.tabs["beside"] = self.beside.add_tab("Worksheet", viser.Icon.NOTEBOOK)
+            self.beside.float(x=0, y=0, width=CANVAS_PX[0], height=CANVAS_PX[1])   # over the 3D view
+            if self.worksheet_beside:
+                self.tabs.pop("Worksheet").remove()
+        beside = self.beside
+        with self.tabs["Scope"]:
+            self.window_ms = self._window_rows() * self.simulation.sample_time_s * 1e3
+            self.y_ranges = [scope.StickyRange() for _ in self.exercise.charts]
             self.charts = [self._add_chart(chart) for chart in self.exercise.charts]
             self.readouts = gui.add_markdown("*computing …*")
-        with panel.add_tab("Pole map", viser.Icon.CHART_DOTS):
+        with self.tabs["Pole map"]:
             dominant, full = _pole_charts(first.poles)
             self.pole_plots = tuple(gui.add_uplot(data, **options, aspect=1.6) for data, options in (dominant, full))
             gui.add_markdown("Poles in the s-plane (discrete poles mapped by s = ln z / T); the dashed line is "
                              "the imaginary axis, right of it is unstable. The first map leaves out the fast, "
                              "well-damped poles (sensor lag, amplifier) that squash the second.")
             self.pole_table = gui.add_markdown("")
-        if first.plots:
-            with panel.add_tab("Analysis", viser.Icon.CHART_LINE):
-                self.plots = []
-                for plot in first.plots:
-                    data, options = _plot_chart(plot)
-                    self.plots.append(gui.add_uplot(data, **options, aspect=2.0))
-        else:
+        with self.tabs["Analysis"]:
             self.plots = []
+            for plot in first.plots:
+                data, options = _plot_chart(plot)
+                self.plots.append(gui.add_uplot(data, **options, aspect=2.0))
+            if not first.plots:
+                gui.add_markdown("*This exercise has no analysis plots.*")
         worksheet = (STATIC / "worksheets" / self.exercise.worksheet).read_text(encoding="utf-8")
-        with panel.add_tab("Worksheet", viser.Icon.NOTEBOOK):
+        if "Worksheet" in self.tabs:
+            with self.tabs["Worksheet"]:
+                gui.add_markdown(worksheet)
+        with self.tabs["beside"]:
             gui.add_markdown(worksheet)
-        gui.main_panel.dock_left()                    # both panels docked, the 3D view in between
-        gui.main_panel.set_width(CONTROL_WIDTH_PX)
-        panel.dock_right()
-        panel.set_width(PANEL_WIDTH_PX)
-        # The worksheet can also take the 3D view's place, beside the charts (self-paced work).
-        beside = gui.add_panel(visible=self.worksheet_beside)
-        with beside.add_tab("Worksheet", viser.Icon.NOTEBOOK):
-            gui.add_markdown(worksheet)
-        beside.float(x=0, y=0, width=CANVAS_PX[0], height=CANVAS_PX[1])   # over the 3D view, docks untouched
 
         def show_beside(_event) -> None:
-            self.worksheet_beside = beside.visible = toggle.value
+            """The worksheet is in one place at a time: beside the charts or in their tabs."""
+            with self.gui_lock:
+                self.worksheet_beside = beside.visible = toggle.value
+                if toggle.value and "Worksheet" in self.tabs:
+                    self.tabs.pop("Worksheet").remove()
+                elif not toggle.value and "Worksheet" not in self.tabs:
+                    self.tabs["Worksheet"] = self.panel.add_tab(*PANEL_TABS[-1])
+                    with self.tabs["Worksheet"]:
+                        gui.add_markdown(worksheet)
         toggle.on_update(show_beside)
 
     def _add_input(self, parameter: Parameter):
@@ -225,17 +245,17 @@ class LabSession:
         return handle
 
     def _add_chart(self, chart: Chart):
-        series = [viser.uplot.Series(label="time [ms]")]
+        series = [viser.uplot.Series(label="time before now [ms]")]
         if chart.band:
             series += [viser.uplot.Series(label="+3σ", stroke="rgba(214,39,40,0.35)", width=1),
                        viser.uplot.Series(label="−3σ", stroke="rgba(214,39,40,0.35)", width=1)]
         series += [viser.uplot.Series(label=s.label, stroke=s.color, width=1.5) for s in chart.series]
         bands = (viser.uplot.Band(series=(1, 2), fill="rgba(214,39,40,0.12)"),) if chart.band else None
-        empty = tuple(np.zeros(2) for _ in series)
+        empty = (np.array([-self.window_ms, 0.0]),) + tuple(np.zeros(2) for _ in series[1:])
         return self.client.gui.add_uplot(
             empty, tuple(series), title=f"{chart.title} [{chart.unit}]", bands=bands,
-            axes=(viser.uplot.Axis(label="time [ms]"), viser.uplot.Axis(label=f"{chart.title} [{chart.unit}]")),
-            scales={"x": viser.uplot.Scale(time=False)}, aspect=SCOPE_ASPECT)
+            **scope.chart_options("time before now [ms]", f"[{chart.unit}]"),
+            scales=scope.scope_scales(self.window_ms, None), aspect=SCOPE_ASPECT)
 
     # -- events --------------------------------------------------------------------
     def _on_input(self, parameter: Parameter, shown) -> None:
@@ -377,7 +397,7 @@ class LabSession:
                 carry += time_scale * elapsed / T
                 steps, carry = int(carry), carry - int(carry)
                 trace = self.simulation.advance(steps)
-                window = min(max(int(SCOPE_WINDOW_S * max(time_scale / 0.01, 1.0) / T), 2), SCOPE_ROWS)
+                window = self._window_rows()
                 self.buffer = np.concatenate([self.buffer, trace])[-window:]
                 message = self.simulation.status_message()
                 if message:
@@ -392,8 +412,24 @@ class LabSession:
                     next_readouts = now + LIVE_READOUT_PERIOD_S
                 if message and self.simulation is stopped and not self.running:   # not reset meanwhile
                     self.status.content = f"**Stopped: {message}** Press Run or Reset to start again."
-                    self.client.add_notification("Simulation stopped", message, color="red",
-                                                 auto_close_seconds=10.0)
+                    self._notify_stop(message)
+
+    def _notify_stop(self, message: str) -> None:
+        """One 'Simulation stopped' card at a time: a new stop replaces the last card."""
+        self._clear_notification()
+        self.notification = self.client.add_notification("Simulation stopped", message, color="red",
+                                                         auto_close_seconds=10.0)
+
+    def _clear_notification(self) -> None:
+        if getattr(self, "notification", None) is not None:
+            self.notification.remove()
+            self.notification = None
+
+    def _window_rows(self) -> int:
+        """Samples in the scope window at the current time scale."""
+        time_scale = self.values.get("time_scale", 1.0)
+        T = self.simulation.sample_time_s
+        return min(max(int(SCOPE_WINDOW_S * max(time_scale / 0.01, 1.0) / T), 2), SCOPE_ROWS)
 
     def _latest(self) -> dict[str, float]:
         """The newest sample of the scope buffer by column name (empty before the first)."""
@@ -408,15 +444,20 @@ class LabSession:
             buffer = self.buffer
         if len(buffer) < 2:
             return
-        rows = buffer[:: max(1, len(buffer) // SCOPE_POINTS)]
-        t_ms = rows[:, 0] * 1e3
-        for chart, handle in zip(self.exercise.charts, self.charts):
+        rows = buffer[::-1][:: max(1, len(buffer) // SCOPE_POINTS)][::-1]   # always with the newest sample
+        t_ms = scope.relative_ms(rows[:, 0])
+        window_ms = self._window_rows() * self.simulation.sample_time_s * 1e3
+        rescaled = window_ms != self.window_ms
+        self.window_ms = window_ms
+        for chart, handle, y_range in zip(self.exercise.charts, self.charts, self.y_ranges):
             columns = [t_ms]
             if chart.band:
                 centre, sigma = rows[:, self.columns[chart.band[0]]], rows[:, self.columns[chart.band[1]]]
                 scale = chart.series[0].scale
                 columns += [(centre + 3 * sigma) * scale, (centre - 3 * sigma) * scale]
             columns += [rows[:, self.columns[s.column]] * s.scale for s in chart.series]
+            if y_range.update(columns[1:]) or rescaled:
+                handle.scales = scope.scope_scales(window_ms, y_range.range)
             handle.data = tuple(columns)
 
 
