@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import viser
 
-from app import layout, scope
+from app import layout, margins, scope
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, registry
 from lab_modules.parameters import Parameter, ParameterError
 from lab_modules.scenes.bearing import CANVAS_PX
@@ -172,6 +172,8 @@ class LabSession:
         self.error = gui.add_markdown("")
 
         first = next(_analyses(self.exercise.analyse(dict(self.values))))
+        self.shown_margins = margins.margin_view(self.exercise, dict(self.values))
+        first = margins.with_margins(first, self.shown_margins)
         if getattr(self, "panel", None) is None:      # docked once per tab (see app/layout.py)
             self.panel = gui.add_panel()
             self.tabs = {name: self.panel.add_tab(name, icon) for name, icon in PANEL_TABS}
@@ -330,9 +332,19 @@ class LabSession:
                     return
                 (generation, exercise, values), self.analysis_request = self.analysis_request, None
             try:
+                last = None
                 for result in _analyses(exercise.analyse(values)):
-                    if self.analysis_request is not None or not self._show(generation, result):
+                    shown = margins.with_margins(result, self.shown_margins)   # the last margins until ...
+                    if self.analysis_request is not None or not self._show(generation, shown):
                         break
+                    last = result
+                else:                                     # ... the new ones are ready (they take longer)
+                    if last is not None and self.analysis_request is None:
+                        fresh = margins.margin_view(exercise, values)
+                        with self.gui_lock:
+                            if self._current(generation):
+                                self.shown_margins = fresh
+                        self._show(generation, margins.with_margins(last, fresh))
             except (ValueError, ArithmeticError) as error:   # incl. ParameterError, LinAlgError: the tab's
                 traceback.print_exc()                         # analyses go on at the next slider move
                 with self.gui_lock:
