@@ -1,18 +1,18 @@
 """The rolling scope charts: fixed axes a student can read by eye.
 
-The time axis is the time before the newest sample, pinned to the scope
-window (−window … 0 ms).  Pinned, not scrolled: viser's chart keeps an
-auto-ranged x scale *relative* to the data's x extent and re-derives that
-relation on every data update; when a chart's tab is hidden (width 0) and
-shown again, the update that lands on the re-shown chart reads uPlot's
-placeholder scale [0, 1], so the relation becomes "a 1-unit window far
-behind the data" and stays so — the blank scope of issue 11, defect 1.  A
-static x range turns that mechanism off (viser treats it as a non-auto
-scale) and the data's x extent no longer moves.
+The time axis is the time before the newest sample and the data always span
+exactly the scope window (−window … 0 ms).  Not scrolled: viser's chart keeps
+an auto-ranged x scale *relative* to the data's x extent and re-derives that
+relation whenever the extent moves (every frame, for absolute times); when a
+chart's tab is hidden (width 0) and shown again, that update read uPlot's
+placeholder scale [0, 1], so the relation became "a 1 ms window far behind
+the data" and stayed so — the blank scope of issue 11, defect 1.  With a
+fixed extent the relation is set once, when the chart is made.
 
 The y axis holds still as well (defect 13): a range in round steps that
 grows at once when a trace leaves it and shrinks only after the traces have
-used less than a third of it for ``SHRINK_AFTER_S``.
+used less than a third of it for ``SHRINK_AFTER_S``; an invisible anchor
+series spans it, so uPlot's own auto range lands on it.
 """
 
 from __future__ import annotations
@@ -84,12 +84,16 @@ class StickyRange:
         return True
 
 
-def scope_scales(window_ms: float, y_range: tuple[float, float] | None) -> dict:
-    """uPlot scales of a scope chart: time pinned to the window, y to ``y_range`` (None: auto)."""
-    scales = {"x": viser.uplot.Scale(time=False, auto=False, range=(-float(window_ms), 0.0))}
-    if y_range is not None:
-        scales["y"] = viser.uplot.Scale(auto=False, range=(float(y_range[0]), float(y_range[1])))
-    return scales
+#: An invisible series over the sticky range: uPlot's auto range then covers exactly it.  (Changing
+#: the scale options instead makes viser rebuild the chart, which now and then came up without axes.)
+ANCHOR_SERIES = viser.uplot.Series(label="range", stroke="rgba(0,0,0,0)", width=0,
+                                   points=viser.uplot.Series_Points(show=False))
+
+
+def anchor(y_range: tuple[float, float] | None, n: int) -> np.ndarray:
+    """The anchor series' values: alternately the range's ends (zeros before the first range)."""
+    low, high = y_range if y_range is not None else (0.0, 0.0)
+    return np.where(np.arange(n) % 2 == 1, high, low)
 
 
 def chart_options(x_label: str, y_label: str) -> dict:
@@ -101,6 +105,14 @@ def chart_options(x_label: str, y_label: str) -> dict:
             "padding": PADDING}
 
 
-def relative_ms(times_s: np.ndarray) -> np.ndarray:
-    """The scope's time axis: ms before the newest sample (≤ 0)."""
-    return (times_s - times_s[-1]) * 1e3
+def spanning(rows: np.ndarray, window_ms: float) -> tuple[np.ndarray, np.ndarray]:
+    """The frame's rows and their time axis [ms before the newest sample], starting exactly at
+    −window: while the window fills (after a start or reset) the oldest row is repeated there,
+    so the x extent of the data never moves."""
+    t_ms = (rows[:, 0] - rows[-1, 0]) * 1e3
+    if t_ms[0] > -window_ms + 1e-9:
+        rows, t_ms = np.vstack([rows[:1], rows]), np.concatenate([[-window_ms], t_ms])
+    else:
+        t_ms = t_ms.copy()
+        t_ms[0] = -window_ms
+    return rows, t_ms

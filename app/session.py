@@ -252,12 +252,13 @@ class LabSession:
             series += [viser.uplot.Series(label="+3σ", stroke="rgba(214,39,40,0.35)", width=1),
                        viser.uplot.Series(label="−3σ", stroke="rgba(214,39,40,0.35)", width=1)]
         series += [viser.uplot.Series(label=s.label, stroke=s.color, width=1.5) for s in chart.series]
+        series += [scope.ANCHOR_SERIES]               # holds the y range still without rebuilding the chart
         bands = (viser.uplot.Band(series=(1, 2), fill="rgba(214,39,40,0.12)"),) if chart.band else None
         empty = (np.array([-self.window_ms, 0.0]),) + tuple(np.zeros(2) for _ in series[1:])
         return self.client.gui.add_uplot(
             empty, tuple(series), title=f"{chart.title} [{chart.unit}]", bands=bands,
             **scope.chart_options("time before now [ms]", f"[{chart.unit}]"),
-            scales=scope.scope_scales(self.window_ms, None), aspect=SCOPE_ASPECT)
+            scales={"x": viser.uplot.Scale(time=False)}, aspect=SCOPE_ASPECT)
 
     # -- events --------------------------------------------------------------------
     def _on_input(self, parameter: Parameter, shown) -> None:
@@ -457,9 +458,8 @@ class LabSession:
         if len(buffer) < 2:
             return
         rows = buffer[::-1][:: max(1, len(buffer) // SCOPE_POINTS)][::-1]   # always with the newest sample
-        t_ms = scope.relative_ms(rows[:, 0])
         window_ms = self._window_rows() * self.simulation.sample_time_s * 1e3
-        rescaled = window_ms != self.window_ms
+        rows, t_ms = scope.spanning(rows, window_ms)
         self.window_ms = window_ms
         for chart, handle, y_range in zip(self.exercise.charts, self.charts, self.y_ranges):
             columns = [t_ms]
@@ -468,9 +468,8 @@ class LabSession:
                 scale = chart.series[0].scale
                 columns += [(centre + 3 * sigma) * scale, (centre - 3 * sigma) * scale]
             columns += [rows[:, self.columns[s.column]] * s.scale for s in chart.series]
-            if y_range.update(columns[1:]) or rescaled:
-                handle.scales = scope.scope_scales(window_ms, y_range.range)
-            handle.data = tuple(columns)
+            y_range.update(columns[1:])
+            handle.data = tuple(columns) + (scope.anchor(y_range.range, len(t_ms)),)
 
 
 def _plot_chart(plot: Plot) -> tuple[tuple, dict]:
