@@ -9,6 +9,7 @@ the same objects, so no lab number is typed twice.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 
@@ -63,7 +64,7 @@ class Claim:
     def holds(self, value: float) -> bool:
         """Whether ``value`` lies in the accepted range (NaN never does)."""
         low, high = self.accept
-        if value != value:
+        if math.isnan(value):
             return False
         return (low is None or value >= low) and (high is None or value <= high)
 
