@@ -43,6 +43,10 @@ SCOPE_ASPECT = 2.2                # width / height of a scope chart
 SETTLE_BEFORE_REMOVAL_S = 0.3     # an exercise switch waits this long between the last chart update and removal
 LOG_SCALE = {"distr": 3, "log": 10}   # uPlot's logarithmic scale
 LOG_DECADES = 4                   # a logarithmic plot shows at most this many decades
+#: What the number boxes beside the sliders do with unusual entries (the browser handles them, unseen
+#: by the server: issue 11, defect 10)
+NUMBER_BOX_HINT = ("*Number boxes: type a decimal point (1.5, not 1,5); a value beyond a slider's ends is "
+                   "set to the nearest end; an emptied box keeps the value in use.*")
 PANEL_TABS = (("Scope", viser.Icon.WAVE_SINE), ("Pole map", viser.Icon.CHART_DOTS),
               ("Analysis", viser.Icon.CHART_LINE), ("Worksheet", viser.Icon.NOTEBOOK))
 LIGHT_DAMPING = 0.3               # poles below this damping always belong to the dominant view
@@ -169,6 +173,7 @@ class LabSession:
             with gui.add_folder(group, expand_by_default=index == 0 or group in ("Controller", "Run")):
                 for parameter in parameters:
                     self.inputs[parameter.name] = self._add_input(parameter)
+        gui.add_markdown(NUMBER_BOX_HINT)
         self.error = gui.add_markdown("")
 
         first = next(_analyses(self.exercise.analyse(dict(self.values))))
