@@ -9,6 +9,7 @@ Reports, from one run:
   relative difference between the two loops' estimates;
 * the aggregate speed of two simulations on two threads against one, and the
   CPU time per wall time of that run (near 2 when the loops run in parallel);
+* the ``thrust_liftoff`` loop's speed (paper 003, target 100x real time);
 * for every exercise, its simulation's speed and the share of one core a tab
   takes at the exercise's default time scale (for sizing a classroom server).
 """
@@ -96,6 +97,26 @@ def _throughput(seconds: float, threads: int, repeats: int = 7) -> tuple[float, 
     return (*best, per_cpu_second)
 
 
+def thrust_liftoff_speed(seconds: float = 2.0, repeats: int = 5) -> dict:
+    """The ``thrust_liftoff`` loop (paper 003: 0.1 ms samples, G(s), filter-PID, σ_v = 5 µm,
+    relaunching every second as in the browser): simulated seconds per wall second and per
+    CPU second on one thread, best of ``repeats``."""
+    exercise = get("thrust_liftoff")
+    values = exercise.resolve({"feedback": "estimated"})
+    simulation = exercise.simulation(values)
+    simulation.advance(100)                                  # compile / warm up
+    n_steps = max(int(seconds / simulation.sample_time_s), 1)
+    wall_speed = cpu_speed = 0.0
+    for _ in range(repeats):
+        cpu, start = time.process_time(), time.perf_counter()
+        simulation.advance(n_steps)
+        wall, cpu = time.perf_counter() - start, time.process_time() - cpu
+        wall_speed = max(wall_speed, seconds / wall)
+        cpu_speed = max(cpu_speed, seconds / cpu) if cpu > 0 else cpu_speed
+    return {"realtime_factor_one_core": wall_speed, "realtime_factor_per_cpu_second": cpu_speed,
+            "target_realtime_factor": 100}
+
+
 def run(seconds: float = 2.0) -> dict:
     single, _, single_per_cpu_second = _throughput(seconds, 1)
     parallel, cpu_per_wall, _ = _throughput(seconds, 2)
@@ -117,6 +138,7 @@ def run(seconds: float = 2.0) -> dict:
         "speedup_vs_filterpy_loop": single / filterpy_speed,
         "max_relative_estimate_difference_vs_filterpy": float(np.max(np.abs(compiled - reference)) / scale),
         "targets": {"realtime_factor_one_core": 200, "speedup_vs_filterpy_loop": 50},
+        "thrust_liftoff": thrust_liftoff_speed(seconds),
     }
 
 

@@ -87,7 +87,8 @@ def lab_server(log_path: Path, timeout_s: float = 120.0) -> Iterator[LabServer]:
     """The lab served by a child process on a free port; yields its URL and process id."""
     port = free_port()
     with log_path.open("w") as log:
-        server = subprocess.Popen([sys.executable, "-m", "app", "--port", str(port)], cwd=ROOT,
+        server = subprocess.Popen([sys.executable, "-m", "app", "--port", str(port),
+                                   "--data-dir", str(log_path.parent / "lab-data")], cwd=ROOT,
                                   stdout=log, stderr=subprocess.STDOUT, text=True)
         url = f"http://127.0.0.1:{port}"
         try:

@@ -1,12 +1,22 @@
 """Command line of the lab.
 
-    python -m app [--host H] [--port P] [--exercise NAME]   start the browser lab (default)
+    python -m app [--host H] [--port P] [--exercise NAME] [--data-dir DIR] [--token T]
+                  [--allow-origin URL ...]     start the browser lab (default; also ``serve``)
+    python -m app serve --workers N [same options] [--worker-ports FIRST]   N lab processes behind HAProxy
+    python -m app haproxy-config --backend HOST:PORT ...    HAProxy configuration for several machines
     python -m app list [--json]                exercises and their parameters
     python -m app run NAME [--set N=V ...] [--duration S] [--seed N] [--data FILE] [--json]
+    python -m app run --code KN-7Q3M [--set N=V ...] [--json]   a saved experiment, headless
+    python -m app save NAME [--set N=V ...] [--data FILE]        save an experiment, print its code
     python -m app bench [--json] [--browser]   throughput benchmark; --browser: slider-to-readout latency
+    python -m app reproduce [--json] [--quick] [--html DIR] [--exercise NAME ...]
+                                               every paper claim measured; exit 1 if one fails
+    python -m app bench --clients N [--workers W]   headless tabs: scope updates/s, bytes/s, CPU; capacity
 
-Bad input (unknown exercise or parameter, non-numbers, NaN, out of range)
-exits with status 2 and one line naming the problem and the valid range.
+Bad input (unknown exercise or parameter, non-numbers, NaN, out of range, a
+busy port, an unknown code) exits with status 2 and one line naming the
+problem and the valid range.  ``run`` exits with status 1 (one line, after
+the output) if a metric is not finite and no stop status explains it.
 """
 
 from __future__ import annotations
@@ -18,24 +28,60 @@ import sys
 import tempfile
 from pathlib import Path
 
+from app import access
+from app.store import Store, StoreError
 from lab_modules.exercises import get, registry
 from lab_modules.parameters import ParameterError
+from lab_modules.recordings import MAX_BYTES
 
 USAGE_ERROR = 2
+NOT_FINITE = 1
+
+
+def _serve_options(parser: argparse.ArgumentParser, defaults: bool) -> None:
+    """The server's options, on the main parser (``python -m app --port P``) and on ``serve``
+    (``python -m app serve --port P``; SUPPRESS keeps the subparser from resetting the first)."""
+    def default(value):
+        return value if defaults else argparse.SUPPRESS
+    parser.add_argument("--host", default=default("127.0.0.1"),
+                        help="address to serve on (default 127.0.0.1; 0.0.0.0: the whole network, with a token)")
+    parser.add_argument("--port", default=default("8080"), help="port to serve on, 1 ... 65535 (default 8080)")
+    parser.add_argument("--exercise", default=default("kalman_noise"),
+                        help="exercise a new tab opens on (default kalman_noise; tabs can switch)")
+    parser.add_argument("--data-dir", default=default(None), metavar="DIR",
+                        help="where saved experiments live (default ~/.local/share/amb-lab)")
+    parser.add_argument("--token", default=default(None),
+                        help="class token asked of every new tab when not on loopback (default: generated)")
+    parser.add_argument("--allow-origin", action="append", default=default([]), metavar="URL",
+                        help="a web origin besides the lab's own address that may open tabs (repeatable), "
+                             "e.g. https://lab.example.org behind a proxy")
 
 
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m app", description="AMB estimation lab")
-    parser.add_argument("--host", default="127.0.0.1", help="address to serve on (default 127.0.0.1)")
-    parser.add_argument("--port", type=int, default=8080, help="port to serve on (default 8080)")
-    parser.add_argument("--exercise", default="kalman_noise",
-                        help="exercise a new tab opens on (default kalman_noise; tabs can switch)")
+    _serve_options(parser, defaults=True)
     sub = parser.add_subparsers(dest="command")
-    sub.add_parser("serve", help="start the browser lab (the default)")
+    serve = sub.add_parser("serve", help="start the browser lab (the default); --workers N: N processes "
+                                         "behind HAProxy")
+    _serve_options(serve, defaults=False)
+    serve.add_argument("--workers", type=int, default=None, metavar="N",
+                       help="lab processes behind HAProxy (default: one per core; 1: one process, no HAProxy)")
+    serve.add_argument("--worker-ports", type=int, default=None, metavar="FIRST",
+                       help="the workers' loopback ports: FIRST, FIRST+1, ... (default: --port + 1)")
+    balancer = sub.add_parser("haproxy-config", help="print an HAProxy configuration for lab processes "
+                                                     "on several machines")
+    balancer.add_argument("--backend", action="append", required=True, metavar="HOST:PORT",
+                          help="a lab process or a machine's 'serve --workers' address (repeatable)")
+    balancer.add_argument("--host", dest="bind_host", default="0.0.0.0",
+                          help="address the balancer listens on (default 0.0.0.0)")
+    balancer.add_argument("--port", dest="bind_port", type=int, default=8080,
+                          help="port the balancer listens on (default 8080)")
     listing = sub.add_parser("list", help="list exercises and their parameters")
     listing.add_argument("--json", action="store_true", help="print JSON")
     run = sub.add_parser("run", help="run one exercise headless and print its metrics")
-    run.add_argument("exercise")
+    run.add_argument("exercise", nargs="?", help="exercise name (or --code)")
+    run.add_argument("--code", default=None, help="run a saved experiment (e.g. KN-7Q3M)")
+    run.add_argument("--data-dir", default=None, metavar="DIR", help="where saved experiments live")
     run.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                      help="override a parameter (repeatable)")
     run.add_argument("--duration", default=None, help="simulated seconds (default: the exercise's)")
@@ -43,15 +89,51 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--data", default=None, metavar="FILE",
                      help="data file for exercises that take one (e.g. a recording CSV)")
     run.add_argument("--json", action="store_true", help="print JSON")
+    save = sub.add_parser("save", help="save an experiment (e.g. an instructor's preset) and print its code")
+    save.add_argument("exercise")
+    save.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                      help="a parameter value (repeatable; the rest keep their defaults)")
+    save.add_argument("--data", default=None, metavar="FILE", help="a recording for exercises that take one")
+    save.add_argument("--data-dir", default=None, metavar="DIR", help="where saved experiments live")
     bench = sub.add_parser("bench", help="closed-loop throughput benchmark")
     bench.add_argument("--json", action="store_true", help="print JSON")
     bench.add_argument("--seconds", type=float, default=2.0, help="simulated seconds per measurement")
     bench.add_argument("--browser", action="store_true",
                        help="instead: slider-to-readout latency in headless Chromium (needs the test extras)")
+    reproduce = sub.add_parser(
+        "reproduce", help="measure every exercise's paper claims and print paper vs lab",
+        description="Measure every exercise's paper claims (the `claims` of each exercise file) and print "
+                    "paper vs lab with the range the lab holds itself to. Exit status 1 if a claim fails. "
+                    "Default: each claim on seeds 0 to 4 (it must hold on all; exercises without a seed "
+                    "run once). --quick: seed 0 only, each claim at its own settings and run length, as the "
+                    "test suite checks it (under 3 minutes on 2 cores).")
+    reproduce.add_argument("--json", action="store_true", help="print JSON")
+    reproduce.add_argument("--quick", action="store_true",
+                           help="seed 0 only (default: seeds 0-4; a claim must hold on each)")
+    reproduce.add_argument("--html", default=None, metavar="DIR",
+                           help="also write DIR/index.html: the table and the figures behind each exercise's "
+                                "claims (PNG embedded)")
+    reproduce.add_argument("--exercise", action="append", default=[], metavar="NAME", dest="only",
+                           help="only this exercise (repeatable; default: all)")
+    bench.add_argument("--clients", type=int, default=None, metavar="N",
+                       help="instead: N headless websocket tabs against a started server (scope updates/s, "
+                            "bytes/s, server CPU per tab; capacity)")
+    bench.add_argument("--workers", type=int, default=1, metavar="W",
+                       help="with --clients: lab processes behind HAProxy (default 1: one process, no HAProxy)")
+    bench.add_argument("--steps", type=int, default=4, help="with --clients: ramp up in this many steps")
+    bench.add_argument("--window", type=float, default=8.0, help="with --clients: seconds measured per step")
+    bench.add_argument("--bench-port", type=int, default=8140,
+                       help="with --clients: loopback port of the server (workers: the next ports)")
+    bench.add_argument("--breakdown", action="store_true", help="with --clients: bytes by message kind")
+    bench.add_argument("--slider-every", type=int, default=3, metavar="K",
+                       help="with --clients: a tab moves a slider with every K-th camera message (every ~3 s); "
+                            "0: never (streaming cost only)")
+    bench.add_argument("--all-steps", action="store_true",
+                       help="with --clients: go on after a step below the target (default: stop there)")
     return parser
 
 
-def _overrides(pairs: list[str], seed) -> dict:
+def _overrides(pairs: list[str], seed=None, exercise=None) -> dict:
     overrides = {}
     for pair in pairs:
         name, sep, value = pair.partition("=")
@@ -59,7 +141,12 @@ def _overrides(pairs: list[str], seed) -> dict:
             raise ParameterError(f"--set {pair!r} is not NAME=VALUE")
         overrides[name.strip()] = value.strip()
     if seed is not None:
+        if exercise is not None and not any(p.name == "seed" for p in exercise.parameters):
+            raise ParameterError(f"--seed: exercise {exercise.name!r} draws no random numbers "
+                                 "(it works on a recording); leave --seed out")
         overrides["seed"] = seed
+    if "data" in overrides:
+        raise ParameterError("'data' is not a parameter: use --data FILE")
     return overrides
 
 
@@ -70,7 +157,9 @@ def _duration(text, default: float) -> float:
         value = float(text)
     except ValueError:
         raise ParameterError(f"--duration={text!r} is not a number: expected 0.01 ... 60 s") from None
-    if not (math.isfinite(value) and 0.01 <= value <= 60.0):
+    if not math.isfinite(value):
+        raise ParameterError(f"--duration={text!r} is not finite: expected 0.01 ... 60 s")
+    if not 0.01 <= value <= 60.0:
         raise ParameterError(f"--duration={text!r} is out of range: expected 0.01 ... 60 s")
     return value
 
@@ -102,36 +191,99 @@ def command_list(as_json: bool) -> int:
     return 0
 
 
-def _data(exercise, path):
-    """The exercise's parsed data file (None: its shipped default)."""
+def read_data_file(exercise, path) -> tuple[str, bytes] | None:
+    """``--data FILE`` as (name, bytes), reading at most ``MAX_BYTES`` (+1 to tell a larger file)."""
     if path is None:
         return None
     if exercise.data_description is None:
         raise ParameterError(f"exercise {exercise.name!r} takes no --data file")
     try:
-        content = Path(path).read_bytes()
+        with open(path, "rb") as handle:
+            content = handle.read(MAX_BYTES + 1)
     except OSError as error:
         raise ParameterError(f"--data {path!r}: {error.strerror}") from None
-    return exercise.load_data(Path(path).name, content)
+    if len(content) > MAX_BYTES:
+        raise ParameterError(f"--data {path!r}: larger than {MAX_BYTES / 1e6:.0f} MB, the largest file accepted")
+    return Path(path).name, content
+
+
+def _store(data_dir) -> Store:
+    try:
+        return Store(data_dir)
+    except StoreError as error:
+        raise ParameterError(str(error)) from None
+
+
+def non_finite(metrics, path: str = "") -> list[str]:
+    """Keys (``a.b.2``) of the metrics that are NaN or infinite."""
+    if isinstance(metrics, dict):
+        return [k for name, v in metrics.items() for k in non_finite(v, f"{path}{name}.")]
+    if isinstance(metrics, (list, tuple)) or hasattr(metrics, "tolist"):
+        items = metrics.tolist() if hasattr(metrics, "tolist") else metrics
+        if not isinstance(items, list):
+            return non_finite(items, path)
+        return [k for i, v in enumerate(items) for k in non_finite(v, f"{path}{i}.")]
+    if isinstance(metrics, (int, float)) and not isinstance(metrics, bool) and not math.isfinite(metrics):
+        return [path.rstrip(".")]
+    return []
+
+
+def stop_statuses(metrics: dict) -> list[str]:
+    """The metrics' stop statuses other than "ok" (a run that touched down or diverged)."""
+    return [f"{name}: {value}" for name, value in metrics.items()
+            if "status" in name and isinstance(value, str) and value != "ok"]
 
 
 def command_run(args) -> int:
-    exercise = get(args.exercise)
-    overrides = _overrides(args.set, args.seed)
-    if "data" in overrides:
-        raise ParameterError("'data' is not a parameter: use --data FILE")
-    values = exercise.resolve({**overrides, "data": _data(exercise, args.data)})
+    saved = None
+    if args.code is not None:
+        try:
+            saved = _store(args.data_dir).load(args.code)
+        except StoreError as error:
+            raise ParameterError(str(error)) from None
+        if args.exercise is not None and args.exercise != saved.exercise:
+            raise ParameterError(f"{saved.code} is an experiment of {saved.exercise!r}, not {args.exercise!r}")
+    elif args.exercise is None:
+        raise ParameterError("run: name an exercise (python -m app list) or give --code")
+    exercise = get(saved.exercise if saved else args.exercise)
+    overrides = {**(saved.parameters if saved else {}), **_overrides(args.set, args.seed, exercise)}
+    data_file = read_data_file(exercise, args.data)
+    if data_file is None and saved is not None and saved.recording is not None:
+        data_file = (saved.recording_name, saved.recording)
+    data = exercise.load_data(*data_file) if data_file else None
+    values = exercise.resolve({**overrides, "data": data})
     duration = _duration(args.duration, exercise.default_duration_s)
     shown = {name: value for name, value in values.items() if name != "data"}
-    if args.data is not None:
-        shown["data"] = args.data
+    if data_file is not None:
+        shown["data"] = args.data or data_file[0]
     result = {"exercise": exercise.name, "parameters": shown,
               "model": exercise.model(values), "metrics": exercise.metrics(values, duration)}
+    if saved is not None:
+        result["code"] = saved.code
     if args.json:
         print(json.dumps(_jsonable(result), indent=2, ensure_ascii=False))
     else:
         for name, value in result["metrics"].items():
             print(f"{name}: {value}")
+    bad = non_finite(result["metrics"])
+    if bad and not stop_statuses(result["metrics"]):
+        print(f"error: metric {bad[0]} is not finite" + (f" (and {len(bad) - 1} more)" if len(bad) > 1 else "")
+              + " and no stop status explains it", file=sys.stderr)
+        return NOT_FINITE
+    return 0
+
+
+def command_save(args) -> int:
+    exercise = get(args.exercise)
+    overrides = _overrides(args.set, None, exercise)
+    data_file = read_data_file(exercise, args.data)
+    values = exercise.resolve({**overrides, "data": exercise.load_data(*data_file) if data_file else None})
+    name, content = data_file or (None, None)
+    try:
+        code = _store(args.data_dir).save(exercise.name, values, name, content)
+    except StoreError as error:
+        raise ParameterError(str(error)) from None
+    print(code)
     return 0
 
 
@@ -142,21 +294,44 @@ def main(argv: list[str] | None = None) -> int:
             return command_list(args.json)
         if args.command == "run":
             return command_run(args)
+        if args.command == "reproduce":
+            from app.reproduce import main as reproduce_main
+            return reproduce_main(args.json, args.quick, args.html, args.only)
+        if args.command == "save":
+            return command_save(args)
         if args.command == "bench" and args.browser:
             from app.browser_bench import main as browser_bench_main
             with tempfile.TemporaryDirectory() as scratch:
                 return browser_bench_main(args.json, Path(scratch) / "server.log")
+        if args.command == "haproxy-config":
+            from app.hall import check_port, haproxy_config, parse_backend
+            backends = [parse_backend(b) for b in args.backend]
+            print(haproxy_config(args.bind_host, check_port(args.bind_port), backends,
+                                 note="\n# Start the lab on every backend with the same --token; "
+                                      "run: haproxy -f THIS_FILE"), end="")
+            return 0
+        if args.command == "bench" and args.clients is not None:
+            from app.load_bench import main as load_bench_main
+            return load_bench_main(args.clients, args.workers, args.steps, args.window, args.exercise,
+                                   args.bench_port, args.breakdown, args.json, args.all_steps,
+                                   args.slider_every)
         if args.command == "bench":
             from app.bench import main as bench_main
             return bench_main(args.seconds, args.json)
     except ParameterError as error:
         print(f"error: {error}", file=sys.stderr)
         return USAGE_ERROR
-    from app.server import serve
     try:
-        get(args.exercise)
+        access.check_host(args.host)                      # before the (slow) server imports
+        access.check_port(args.port)
+        from app.server import Settings, serve
+        settings = Settings.from_args(args)
+        if args.command == "serve":
+            from app.hall import check_workers, serve_hall
+            workers = check_workers(args.workers)
+            if workers > 1:
+                return serve_hall(settings, workers, args.worker_ports, args.allow_origin or [])
     except ParameterError as error:
         print(f"error: {error}", file=sys.stderr)
         return USAGE_ERROR
-    serve(args.host, args.port, args.exercise)
-    return 0
+    return serve(settings)

@@ -1,23 +1,90 @@
-"""The lab's web server: one viser server, one ``LabSession`` per browser tab."""
+"""The lab's web server: one viser server, one ``LabSession`` per browser tab.
+
+Start-up checks the address first (``access``): a bad ``--host``/``--port`` or
+a busy port ends the program with one line and status 2, and the URL printed
+is the one actually served.  Every tab's messages pass ``traffic`` (coalesced,
+checked); its work runs on its own worker (``session``); its experiment is
+autosaved in the ``store``.  Off loopback, each tab must give the class token,
+and a browser page from another origin cannot open a tab at all.
+"""
 
 from __future__ import annotations
 
+import socket
+import sys
 import threading
 import time
+from dataclasses import dataclass, field
+from pathlib import Path
 
 import viser
 
+from app import access, traffic
 from app.session import LabSession
+from app.store import Store, StoreError
 from lab_modules.exercises import get
+from lab_modules.parameters import ParameterError
 from lab_modules.scenes.bearing import CAMERA_POSITION
 
+USAGE_ERROR = 2
 
-def serve(host: str = "127.0.0.1", port: int = 8080, exercise: str = "kalman_noise") -> None:
+
+@dataclass
+class Settings:
+    """What ``python -m app`` serves, checked (``from_args`` raises ``ParameterError``)."""
+
+    host: str = "127.0.0.1"
+    port: int = 8080
+    exercise: str = "kalman_noise"
+    data_dir: Path | None = None
+    token: str | None = None               # None: no token asked (loopback only)
+    token_generated: bool = False
+    origins: access.OriginPolicy = field(default_factory=access.OriginPolicy)
+
+    @classmethod
+    def from_args(cls, args) -> Settings:
+        host = access.check_host(args.host)
+        port = access.check_port(args.port)
+        get(args.exercise)
+        token, generated = None, False
+        if args.token is not None:
+            token = access.check_token(args.token)
+        elif not access.is_loopback(host):
+            token, generated = access.new_token(), True
+        return cls(host=host, port=port, exercise=args.exercise,
+                   data_dir=Path(args.data_dir) if args.data_dir else None, token=token,
+                   token_generated=generated, origins=access.OriginPolicy(args.allow_origin or ()))
+
+
+def shown_url(host: str, port: int) -> str:
+    """The address students open: for a wildcard bind, this machine's address on the network."""
+    if host in ("0.0.0.0", "::", ""):
+        try:
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+                probe.connect(("192.0.2.1", 9))          # no packet is sent: picks the outgoing interface
+                host = probe.getsockname()[0]
+        except OSError:
+            host = socket.gethostname()
+    return f"http://{'[' + host + ']' if ':' in host else host}:{port}"
+
+
+def serve(settings: Settings) -> int:
     """Serve the lab until interrupted; every connecting tab gets its own simulation,
-    starting on ``exercise`` (each tab can switch)."""
-    chosen = get(exercise)
+    starting on ``settings.exercise`` (each tab can switch).  Returns the exit status."""
+    try:
+        access.check_bindable(settings.host, settings.port)
+        store = Store(settings.data_dir)
+    except (ParameterError, StoreError) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return USAGE_ERROR
+    chosen = get(settings.exercise)
     chosen.simulation(chosen.resolve({})).advance(1)       # compile the loop before the first tab
-    server = viser.ViserServer(host=host, port=port, label="AMB estimation lab", verbose=False)
+    server = viser.ViserServer(host=settings.host, port=settings.port, label="AMB estimation lab", verbose=False)
+    if server.get_port() != settings.port:                 # taken between the check and the start
+        server.stop()
+        print(f"error: port {settings.port} on {settings.host} is in use (is another lab running?): "
+              "choose a free one with --port", file=sys.stderr)
+        return USAGE_ERROR
     # The default view direction (the space diagonal), from farther away: the 3D view is the
     # narrow gap between the docked controls and charts, and the scenes must fit its width.
     server.initial_camera.position = tuple(CAMERA_POSITION)
@@ -25,24 +92,47 @@ def serve(host: str = "127.0.0.1", port: int = 8080, exercise: str = "kalman_noi
     sessions: dict[int, LabSession] = {}
     lock = threading.Lock()
 
+    def report(client_id: int, text: str) -> None:
+        with lock:
+            session = sessions.get(client_id)
+        if session is not None:
+            session.report(text)
+
+    policy = traffic.install(server, report)
+
+    # Both callbacks are async: they run on the event loop, in order, so a tab that closes
+    # while its lab is still being built is always found and stopped (its worker builds it).
     @server.on_client_connect
-    def _(client: viser.ClientHandle) -> None:
-        session = LabSession(client, chosen)
+    async def _(client: viser.ClientHandle) -> None:
+        headers = policy.headers(client.client_id)
+        origin = headers.get("Origin") if headers is not None else None
+        host_header = headers.get("Host") if headers is not None else None
+        if not settings.origins.permits(origin, host_header):
+            print(f"refused a tab from origin {origin!r} (serving {host_header!r})", file=sys.stderr, flush=True)
+            policy.close(client.client_id, "origin not allowed")
+            return
+        session = LabSession(client, chosen, store, settings.token,
+                             on_refused=lambda reason: policy.close(client.client_id, reason))
         with lock:
             sessions[client.client_id] = session
 
     @server.on_client_disconnect
     async def _(client: viser.ClientHandle) -> None:
-        # async: runs on the event loop right after the connection closes (a plain function would
-        # wait for the thread pool while the tab's threads keep writing to the dead connection)
         with lock:
             session = sessions.pop(client.client_id, None)
+        policy.forget(client.client_id)
         if session is not None:
             session.close()
 
-    print(f"AMB estimation lab: open http://{host}:{port} in a browser (Ctrl+C to stop)", flush=True)
+    url = shown_url(settings.host, server.get_port())
+    print(f"AMB estimation lab: open {url} in a browser (Ctrl+C to stop)", flush=True)
+    if settings.token is not None:
+        how = "generated; set your own with --token" if settings.token_generated else "from --token"
+        print(f"Class token: {settings.token} ({how}); every new tab asks for it", flush=True)
+    print(f"Saved experiments: {store.path}", flush=True)
     try:
         while True:
             time.sleep(1.0)
     except KeyboardInterrupt:
         server.stop()
+    return 0

@@ -5,21 +5,32 @@ exercise's parameters, charts, analysis and optional 3D scene, runs the
 simulation on its own thread (the compiled loops release the GIL, so tabs run
 in parallel) and stops everything when the tab closes.  The exercise chooser
 at the top swaps the whole lab for another exercise.
+
+Everything a tab asks for runs on the tab's own *worker* thread, one event at
+a time: the GUI callbacks only record which control changed (newest value
+wins, so a burst of updates costs one), which serialises exercise switches
+and keeps one busy tab from occupying threads the others need.  A tab closed
+while its lab is still being built stops building and starts no threads.
 """
 
 from __future__ import annotations
 
 import itertools
+import re
+import sys
 import threading
 import time
 import traceback
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
 import viser
 
-from app import layout, margins, scope
+from app import layout, margins, scope, worksheets
+from app.access import token_matches
+from app.store import Store, StoreError
+from app.traffic import callback
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, registry
 from lab_modules.parameters import Parameter, ParameterError
 from lab_modules.scenes.bearing import CANVAS_PX
@@ -33,7 +44,9 @@ SCENE_REFRESH = {"1 update/s": 1.0, "10 updates/s (needs a GPU)": 0.1, "still": 
 SCENE_QUIET_AFTER_INPUT_S = 0.5   # the 3D view holds still this long after a control moves: readouts first
 LIVE_READOUT_PERIOD_S = 1.0       # the readouts of the scope window follow the running simulation
 SCOPE_WINDOW_S = 0.05             # simulated time shown on the scope (at the slowest time scale)
-SCOPE_POINTS = 500                # points sent per series per frame
+SCOPE_BUCKETS = 75                # per chart and frame: the extremes of the roughest series in this many
+                                  # time buckets, i.e. <= 150 points across the ~500 px plot (see _scope_rows)
+ROUGHNESS_ROWS = 200              # newest rows that decide which series is the roughest
 SCOPE_ROWS = 20_000               # most samples the scope keeps
 POLE_COLORS = ("#7f7f7f", "#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e")
 CONTROL_WIDTH_PX = 380            # the docked controls (left)
@@ -50,6 +63,45 @@ NUMBER_BOX_HINT = ("*Number boxes: type a decimal point (1.5, not 1,5); a value 
 PANEL_TABS = (("Scope", viser.Icon.WAVE_SINE), ("Pole map", viser.Icon.CHART_DOTS),
               ("Analysis", viser.Icon.CHART_LINE), ("Worksheet", viser.Icon.NOTEBOOK))
 LIGHT_DAMPING = 0.3               # poles below this damping always belong to the dominant view
+AUTOSAVE_AFTER_S = 1.0            # a tab's autosave is written this long after its last change
+TOKEN_ATTEMPTS = 5                # wrong class tokens before a tab is disconnected
+TOKEN_RETRY_S = 1.0               # a wrong token waits this long before the next try
+
+
+#: One tab's worker and analyses together may use this share of a core on average, after a
+#: burst of ``TAB_CPU_BURST_S`` of CPU time: a tab that asks for more (a flood of slider
+#: updates) waits, with its requests coalescing, and the other tabs keep their share.
+TAB_CPU_SHARE = 0.15
+TAB_CPU_BURST_S = 1.0
+
+
+class CpuBudget:
+    """A token bucket of CPU seconds shared by one tab's threads."""
+
+    def __init__(self, share: float = TAB_CPU_SHARE, burst_s: float = TAB_CPU_BURST_S):
+        self.share, self.burst_s = share, burst_s
+        self.allowance, self.refilled = burst_s, time.perf_counter()
+        self.lock = threading.Lock()
+
+    def charge(self, cpu_s: float) -> float:
+        """Book ``cpu_s``; returns how long the tab should now wait [s] (0: within its share)."""
+        with self.lock:
+            now = time.perf_counter()
+            self.allowance = min(self.burst_s, self.allowance + (now - self.refilled) * self.share) - cpu_s
+            self.refilled = now
+            return max(0.0, -self.allowance / self.share)
+
+
+class _Closed(Exception):
+    """The tab closed while its lab was being built."""
+
+
+def escaped(text) -> str:
+    """Text shown in a Markdown element as typed (file names, error messages): Markdown's
+    special characters backslash-escaped, then &, < and > as HTML entities (viser's
+    Markdown renders raw HTML)."""
+    text = re.sub(r"([\\`*_{}\[\]()#+\-.!|~])", r"\\\1", str(text))
+    return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
 
 
 def _format(value: float) -> str:
@@ -72,49 +124,170 @@ class LabSession:
     starts a new one, and the simulation thread and analyses of an older
     generation stop writing to the tab (its GUI handles are gone)."""
 
-    def __init__(self, client: viser.ClientHandle, exercise: Exercise):
+    def __init__(self, client: viser.ClientHandle, exercise: Exercise, store: Store | None = None,
+                 token: str | None = None, on_refused: Callable[[str], None] | None = None):
+        """Cheap: the lab is built on the tab's worker thread (after the class token, if one is set)."""
         self.client = client
         self.exercises = registry()
+        self.store = store
+        self.token = token
+        self.on_refused = on_refused or (lambda _reason: None)   # disconnects the tab (too many wrong tokens)
         self.lock = threading.Lock()                  # values, simulation, buffer, running
         self.gui_lock = threading.RLock()             # writes to the GUI handles; held while the GUI is rebuilt
         self.generations = itertools.count()
         self.generation = next(self.generations)
         self.closed = False
+        self.exercise: Exercise | None = None
         self.scene_refresh = next(iter(SCENE_REFRESH))   # this tab's choice, kept across exercises
         self.worksheet_beside = False                     # likewise
         self.scene_quiet_until = 0.0                      # perf_counter time before which the 3D view waits
         self.thread: threading.Thread | None = None
+        self.analysis_thread: threading.Thread | None = None
         self.analysis_request: tuple[int, Exercise, dict] | None = None
         self.analysis_wakeup = threading.Condition()
-        client.gui.configure_theme(dark_mode=False, show_logo=False, control_width="large")
-        client.scene.configure_default_lights(cast_shadow=False)   # shadow passes made every scene update costly
-        client.scene.configure_environment_map(hdri=None)
-        self._start(exercise)
-        threading.Thread(target=self._analysis_worker, name=f"analysis-{client.client_id}", daemon=True).start()
+        self.events: dict[object, Callable[[], None]] = {}   # control -> what to do (newest wins)
+        self.wakeup = threading.Condition()
+        self.autosave_code: str | None = None
+        self.autosave_due: float | None = None               # perf_counter time of the next autosave
+        self.recording: tuple[str, bytes] | None = None      # the uploaded file, as it came
+        self.problems: set[str] = set()                       # simulation-thread errors already shown
+        self.token_attempts = 0
+        self.budget = CpuBudget()
+        self.worker = threading.Thread(target=self._work, args=(exercise,), name=f"tab-{client.client_id}",
+                                       daemon=True)
+        self.worker.start()
+
+    # -- the tab's worker: every event, in order, newest value per control ----------------
+    def post(self, key, action: Callable[[], None]) -> None:
+        """Queue ``action`` for the worker; it replaces a queued action of the same ``key``
+        (safe from any thread, including viser's event loop)."""
+        with self.wakeup:
+            if self.closed:
+                return
+            self.events.pop(key, None)
+            self.events[key] = action
+            self.wakeup.notify()
+
+    def _on(self, key, action: Callable[[], None]):
+        """A GUI callback that queues ``action`` under ``key`` (runs on the event loop, returns at once)."""
+        return callback(lambda _event: self.post(key, action))
+
+    def _work(self, exercise: Exercise) -> None:
+        try:
+            with self.gui_lock:
+                self._check_open()
+                self.client.gui.configure_theme(dark_mode=False, show_logo=False, control_width="large")
+                # shadow passes made every scene update costly
+                self.client.scene.configure_default_lights(cast_shadow=False)
+                self.client.scene.configure_environment_map(hdri=None)
+                if self.token is None:
+                    self._start(exercise)
+                else:
+                    self._ask_token(exercise)
+            while True:
+                with self.wakeup:
+                    while not self.events and not self.closed and not self._autosave_now():
+                        timeout = None if self.autosave_due is None else \
+                            max(self.autosave_due - time.perf_counter(), 0.0)
+                        self.wakeup.wait(timeout)
+                    if self.closed:
+                        break
+                    events, self.events = list(self.events.values()), {}
+                spent = time.thread_time()
+                for action in events:
+                    self._do(action)
+                if self._autosave_now():
+                    self._autosave()
+                self._pause(self.budget.charge(time.thread_time() - spent), self.wakeup)
+        except _Closed:
+            pass
+        finally:
+            self.close()
+            if self.autosave_due is not None:
+                self._autosave()                          # the last changes of a closed tab
+
+    def _do(self, action: Callable[[], None]) -> None:
+        """Run one event; an error is shown in the tab (one line), never ends the worker."""
+        try:
+            action()
+        except _Closed:
+            raise
+        except Exception as error:  # noqa: BLE001 - any failure of one event is shown, the tab goes on
+            traceback.print_exc()
+            self._show_error(f"⚠️ That did not work: {escaped(error)}")
+
+    def _pause(self, seconds: float, condition: threading.Condition) -> None:
+        """Wait ``seconds`` (the tab used more than its share), or until the tab closes."""
+        if seconds > 0:
+            with condition:
+                condition.wait_for(lambda: self.closed, seconds)
+
+    def _check_open(self) -> None:
+        if self.closed:
+            raise _Closed
+
+    # -- class token -------------------------------------------------------------------
+    def _ask_token(self, exercise: Exercise) -> None:
+        """One field asking for the class token; nothing of the lab is built before it is right."""
+        gui = self.client.gui
+        gui.add_markdown("### AMB estimation lab\nEnter the class token your instructor gave you.")
+        field = gui.add_text("Class token", "", hint="The token shown by the lab's server at start.")
+        enter = gui.add_button("Enter the lab")
+        message = gui.add_markdown("")
+
+        def check() -> None:
+            if token_matches(self.token, field.value):
+                with self.gui_lock:
+                    self.client.gui.reset()
+                    self._start(exercise)
+                return
+            self.token_attempts += 1
+            if self.token_attempts >= TOKEN_ATTEMPTS:
+                self.on_refused("too many wrong class tokens")
+                raise _Closed
+            time.sleep(TOKEN_RETRY_S)                     # guessing costs time; other tabs are not held up
+            message.content = f"⚠️ That is not the class token ({TOKEN_ATTEMPTS - self.token_attempts} tries left)."
+        field.on_update(self._on("token", check))
+        enter.on_click(self._on("token", check))
 
     # -- life cycle ------------------------------------------------------------------
-    def _start(self, exercise: Exercise) -> None:
-        values = exercise.resolve({})
+    def _start(self, exercise: Exercise, overrides: dict | None = None,
+               recording: tuple[str, bytes] | None = None) -> None:
+        """Show ``exercise`` (call holding ``gui_lock``): at ``overrides`` and with ``recording``
+        (a saved experiment), else on its defaults."""
+        self._check_open()
+        data = exercise.load_data(*recording) if recording else None
+        values = exercise.resolve({**(overrides or {}), "data": data})
         simulation = exercise.simulation(values)
         with self.lock:
             self.exercise, self.values, self.simulation, self.running = exercise, values, simulation, True
             self.columns = {name: 1 + i for i, name in enumerate(simulation.columns)}
             self.buffer = np.empty((0, 1 + len(self.columns)))
+        self.recording = recording
         self.shown_poles: dict[str, np.ndarray] | None = None
         self.shown_analysis: Analysis | None = None   # the last analysis shown, redrawn with fresh scope readouts
         self.scene = exercise.scene(self.values)
         self._build_gui()
+        self._check_open()
         if self.scene is not None:
             self.scene.attach(self.client.scene)
+        self._check_open()
         self._request_analysis()
+        if self.analysis_thread is None:
+            self.analysis_thread = threading.Thread(target=self._analysis_worker,
+                                                    name=f"analysis-{self.client.client_id}", daemon=True)
+            self.analysis_thread.start()
+        self._start_simulation_thread()
+        self._changed()
+
+    def _start_simulation_thread(self) -> None:
         self.thread = threading.Thread(target=self._run, args=(self.generation,),
                                        name=f"lab-{self.client.client_id}", daemon=True)
         self.thread.start()
 
-    def _switch(self, title: str) -> None:
-        chosen = next(e for e in self.exercises.values() if e.title == title)
-        if chosen is self.exercise:
-            return
+    def _switch(self, exercise: Exercise, overrides: dict | None = None,
+                recording: tuple[str, bytes] | None = None) -> None:
+        """Replace the tab's lab (on the worker, so switches never overlap)."""
         with self.gui_lock:
             self.generation = next(self.generations)  # the old thread and analyses stop writing
         if self.thread is not None:
@@ -124,21 +297,88 @@ class LabSession:
         self.client.flush()
         time.sleep(SETTLE_BEFORE_REMOVAL_S)
         with self.gui_lock:
+            self._check_open()
             self._clear_notification()                # the old exercise's stop message goes with it
             layout.clear(self.client.gui, keep=(self.panel, self.beside, *self.tabs.values()))   # docks stay
             self.client.scene.reset()
-            self._start(chosen)
+            self._start(exercise, overrides, recording)
+
+    def _choose(self, title: str) -> None:
+        chosen = next(e for e in self.exercises.values() if e.title == title)
+        if chosen is not self.exercise:
+            self._switch(chosen)
 
     def _current(self, generation: int) -> bool:
         """Whether ``generation`` still owns the tab's GUI (call holding ``gui_lock``)."""
         return generation == self.generation and not self.closed
 
     def close(self) -> None:
-        """Stop the simulation and analysis threads; the tab is gone."""
-        with self.gui_lock:
-            self.closed = True
+        """Stop the worker, simulation and analysis threads; the tab is gone (idempotent, any thread)."""
+        self.closed = True
+        with self.wakeup:
+            self.events.clear()
+            self.wakeup.notify()
         with self.analysis_wakeup:
             self.analysis_wakeup.notify()
+
+    def report(self, text: str) -> None:
+        """A one-line message for the tab from outside (e.g. a message the server refused)."""
+        self.post(("report", text), lambda: self._show_error(f"⚠️ {escaped(text)}"))
+
+    def _show_error(self, markdown: str) -> None:
+        with self.gui_lock:
+            if self.exercise is not None and not self.closed and hasattr(self, "error"):
+                self.error.content = markdown
+
+    # -- saved experiments --------------------------------------------------------------
+    def _changed(self) -> None:
+        """Something worth keeping changed: autosave after ``AUTOSAVE_AFTER_S`` of quiet."""
+        if self.store is not None:
+            self.autosave_due = time.perf_counter() + AUTOSAVE_AFTER_S
+
+    def _autosave_now(self) -> bool:
+        return self.autosave_due is not None and time.perf_counter() >= self.autosave_due
+
+    def _snapshot(self) -> tuple[str, dict, str | None, bytes | None]:
+        with self.lock:
+            values = {k: v for k, v in self.values.items() if k != "data"}
+        name, content = self.recording or (None, None)
+        return self.exercise.name, values, name, content
+
+    def _autosave(self) -> None:
+        self.autosave_due = None
+        if self.store is None or self.exercise is None:
+            return
+        try:
+            if self.autosave_code is None:
+                self.autosave_code = self.store.new_autosave(*self._snapshot())
+                self._show_codes()
+            else:
+                self.store.autosave(self.autosave_code, *self._snapshot())
+        except (StoreError, OSError, ValueError) as error:   # sqlite3.Error is not a ValueError: see store
+            print(f"autosave failed: {error}", file=sys.stderr, flush=True)
+
+    def _save(self) -> None:
+        code = self.store.save(*self._snapshot())
+        self.saved_note.content = (f"Saved as **{code}**: type it under *Experiment code* in any tab "
+                                   "(also after a restart) and press *Open*.")
+
+    def _open(self, text: str) -> None:
+        try:
+            saved = self.store.load(text)
+            exercise = self.exercises[saved.exercise]
+        except (StoreError, KeyError) as error:
+            self.saved_note.content = f"⚠️ {escaped(error)}"
+            return
+        recording = (saved.recording_name, saved.recording) if saved.recording is not None else None
+        self._switch(exercise, saved.parameters, recording)
+        self.saved_note.content = f"Opened **{saved.code}**."
+
+    def _show_codes(self) -> None:
+        with self.gui_lock:
+            if self.autosave_code is not None and hasattr(self, "autosave_note") and not self.closed:
+                self.autosave_note.content = (f"This tab is autosaved as **{self.autosave_code}**: "
+                                              "after a reload, open that code.")
 
     # -- GUI ---------------------------------------------------------------------
     def _build_gui(self) -> None:
@@ -146,25 +386,25 @@ class LabSession:
         titles = tuple(e.title for e in self.exercises.values())
         chooser = gui.add_dropdown("Exercise", titles, initial_value=self.exercise.title,
                                    hint="Switch this tab to another exercise (starts it on its defaults).")
-        chooser.on_update(lambda _event: self._switch(chooser.value))
+        chooser.on_update(self._on("exercise", lambda: self._choose(chooser.value)))
         gui.add_markdown(f"### {self.exercise.title}")
         self.status = gui.add_markdown("**Running**")
         buttons = gui.add_button_group("Simulation", ("Run", "Pause", "Reset"))
-        buttons.on_click(lambda event: self._on_button(event.target.value))
+        buttons.on_click(self._on("buttons", lambda: self._on_button(buttons.value)))
         if self.scene is not None:
             refresh = gui.add_dropdown("3D view", tuple(SCENE_REFRESH), initial_value=self.scene_refresh,
                                        hint="How often the 3D view follows the simulation. Smooth motion needs "
                                             "a graphics card; without one it slows the whole page.")
-            refresh.on_update(lambda _event: setattr(self, "scene_refresh", refresh.value))
+            refresh.on_update(self._on("3D view", lambda: setattr(self, "scene_refresh", refresh.value)))
         toggle = gui.add_checkbox("Worksheet beside the charts", self.worksheet_beside,
                                   hint="Show the worksheet in place of the 3D view, next to the scope.")
         if self.exercise.data_description:
             upload = gui.add_upload_button("Load recording (CSV)", icon=viser.Icon.UPLOAD, mime_type=".csv,text/csv",
                                            hint=self.exercise.data_description)
-            upload.on_upload(lambda _event: self._on_upload(upload.value))
+            upload.on_upload(self._on("upload", lambda: self._on_upload(upload.value)))
         if self.exercise.download_label:
             download = gui.add_button(self.exercise.download_label, icon=viser.Icon.DOWNLOAD)
-            download.on_click(lambda _event: self._on_download())
+            download.on_click(self._on("download", self._on_download))
         self.inputs: dict[str, viser.GuiInputHandle] = {}
         groups: dict[str, list[Parameter]] = {}
         for parameter in self.exercise.parameters:
@@ -175,6 +415,16 @@ class LabSession:
                     self.inputs[parameter.name] = self._add_input(parameter)
         gui.add_markdown(NUMBER_BOX_HINT)
         self.error = gui.add_markdown("")
+        if self.store is not None:
+            with gui.add_folder("Saved experiment", expand_by_default=False):
+                self.autosave_note = gui.add_markdown("")
+                code = gui.add_text("Experiment code", "", hint="A code such as KN-7Q3M from Save (any tab, "
+                                                                 "any day) or from your instructor.")
+                actions = gui.add_button_group("Experiment", ("Save", "Open"))
+                actions.on_click(self._on("experiment", lambda: self._save() if actions.value == "Save"
+                                          else self._open(code.value)))
+                self.saved_note = gui.add_markdown("")
+            self._show_codes()
 
         first = next(_analyses(self.exercise.analyse(dict(self.values))))
         self.shown_margins = margins.margin_view(self.exercise, dict(self.values))
@@ -212,12 +462,13 @@ class LabSession:
                 self.plots.append(gui.add_uplot(data, **options, aspect=2.0))
             if not first.plots:
                 gui.add_markdown("*This exercise has no analysis plots.*")
-        worksheet = (STATIC / "worksheets" / self.exercise.worksheet).read_text(encoding="utf-8")
+        worksheet = worksheets.current(self.exercise)    # claims table filled in as it is measured
+        sheets = {}
         if "Worksheet" in self.tabs:
             with self.tabs["Worksheet"]:
-                gui.add_markdown(worksheet)
+                sheets["tab"] = gui.add_markdown(worksheet)
         with self.tabs["beside"]:
-            gui.add_markdown(worksheet)
+            sheets["beside"] = gui.add_markdown(worksheet)
 
         def show_beside(_event) -> None:
             """The worksheet is in one place at a time: beside the charts or in their tabs."""
@@ -225,11 +476,19 @@ class LabSession:
                 self.worksheet_beside = beside.visible = toggle.value
                 if toggle.value and "Worksheet" in self.tabs:
                     self.tabs.pop("Worksheet").remove()
+                    sheets.pop("tab", None)
                 elif not toggle.value and "Worksheet" not in self.tabs:
                     self.tabs["Worksheet"] = self.panel.add_tab(*PANEL_TABS[-1])
                     with self.tabs["Worksheet"]:
-                        gui.add_markdown(worksheet)
-        toggle.on_update(show_beside)
+                        sheets["tab"] = gui.add_markdown(sheets["beside"].content)
+        toggle.on_update(self._on("beside", lambda: show_beside(None)))
+
+        def show_measured(sheet: str, generation: int = self.generation) -> None:
+            with self.gui_lock:
+                if self._current(generation):
+                    for handle in sheets.values():
+                        handle.content = sheet
+        worksheets.when_measured(self.exercise, show_measured)
 
     def _add_input(self, parameter: Parameter):
         gui, value = self.client.gui, self.values[parameter.name]
@@ -248,7 +507,7 @@ class LabSession:
             handle = gui.add_slider(label, parameter.minimum, parameter.maximum,
                                     step=parameter.step or (parameter.maximum - parameter.minimum) / 1000,
                                     initial_value=float(value), hint=parameter.description)
-        handle.on_update(lambda _event, p=parameter, h=handle: self._on_input(p, h.value))
+        handle.on_update(self._on(("input", parameter.name), lambda p=parameter, h=handle: self._on_input(p, h.value)))
         return handle
 
     def _add_chart(self, chart: Chart):
@@ -271,12 +530,13 @@ class LabSession:
         try:
             value = parameter.parse(value)
         except ParameterError as error:
-            self.error.content = f"⚠️ {error}"
+            self.error.content = f"⚠️ {escaped(error)}"
             return
         self.error.content = ""
         self.scene_quiet_until = time.perf_counter() + SCENE_QUIET_AFTER_INPUT_S
         with self.lock:
             self.values[parameter.name] = value
+        self._changed()
         if parameter.name == "time_scale":
             return
         self._request_analysis()                      # readouts first: they are what the student watches
@@ -286,19 +546,24 @@ class LabSession:
             else:
                 self.simulation = self.exercise.retune(self.simulation, self.values)
         if self.scene is not None:
-            self.scene.update(dict(self.values))
+            try:
+                self.scene.update(dict(self.values))
+            except Exception as error:  # noqa: BLE001 - the 3D view is not worth the lab
+                self._problem("3D view", error)
 
     def _on_upload(self, uploaded) -> None:
         try:
             data = self.exercise.load_data(uploaded.name, uploaded.content)
         except ParameterError as error:
             named = str(error) if uploaded.name in str(error) else f"{uploaded.name}: {error}"
-            self.error.content = f"⚠️ {named}"
+            self.error.content = f"⚠️ {escaped(named)}"
             return
-        self.error.content = f"Loaded {uploaded.name}."
+        self.error.content = f"Loaded {escaped(uploaded.name)}."
         with self.lock:
             self.values["data"] = data
             self._reset()
+        self.recording = (uploaded.name, uploaded.content)
+        self._changed()
         self._request_analysis()
 
     def _on_download(self) -> None:
@@ -314,7 +579,11 @@ class LabSession:
             if which == "Reset" or which == "Run" and self.simulation.status_message():
                 self._reset()
             self.running = which != "Pause"
-        self.status.content = "**Running**" if self.running else "**Paused**"
+        with self.gui_lock:
+            if which != "Pause" and (self.thread is None or not self.thread.is_alive()) and not self.closed:
+                self._start_simulation_thread()       # never left without a simulation
+            self.problems.clear()
+            self.status.content = "**Running**" if self.running else "**Paused**"
 
     def _reset(self) -> None:
         self.simulation = self.exercise.simulation(self.values)
@@ -337,6 +606,7 @@ class LabSession:
                 if self.closed:
                     return
                 (generation, exercise, values), self.analysis_request = self.analysis_request, None
+            spent = time.thread_time()
             try:
                 last = None
                 for result in _analyses(exercise.analyse(values)):
@@ -344,6 +614,8 @@ class LabSession:
                     if self.analysis_request is not None or not self._show(generation, shown):
                         break
                     last = result
+                    self._pause(self.budget.charge(time.thread_time() - spent), self.analysis_wakeup)
+                    spent = time.thread_time()
                 else:                                     # ... the new ones are ready (they take longer)
                     if last is not None and self.analysis_request is None:
                         fresh = margins.margin_view(exercise, values)
@@ -395,42 +667,75 @@ class LabSession:
                 self.readouts.content = readouts
 
     # -- simulation thread -------------------------------------------------------------
+    def _problem(self, where: str, error: Exception) -> None:
+        """An error of the simulation thread or the 3D view: shown once in the tab, logged once."""
+        text = f"{where}: {type(error).__name__}: {error}"
+        if text in self.problems:
+            return
+        self.problems.add(text)
+        traceback.print_exception(error)
+        with self.gui_lock:
+            if not self.closed and hasattr(self, "error"):
+                self.error.content = f"⚠️ {escaped(text)} (the simulation goes on)"
+
     def _run(self, generation: int) -> None:
+        """The simulation thread: an error in one frame is reported and the next frame goes on."""
         carry, last, next_scene, next_readouts = 0.0, time.perf_counter(), 0.0, 0.0
         T = self.simulation.sample_time_s
+        next_frame = last
         while self._current(generation):
-            time.sleep(FRAME_S)
+            next_frame += FRAME_S                     # a steady frame rate: the frame's own work is not added
+            delay = next_frame - time.perf_counter()
+            if delay > 0:
+                time.sleep(delay)
+            else:
+                next_frame = time.perf_counter()      # behind (a busy server): no burst of frames to catch up
             if not self._current(generation):         # the tab closed or switched during the sleep
                 return
             now = time.perf_counter()
             elapsed, last = now - last, now
-            period = SCENE_REFRESH[self.scene_refresh]
-            if self.scene is not None and period is not None and now >= max(next_scene, self.scene_quiet_until):
-                self.scene.animate(now, self._latest())
-                next_scene = now + period
-            with self.lock:
-                if not self.running:
-                    continue
-                time_scale = self.values.get("time_scale", 1.0)
-                carry += time_scale * elapsed / T
-                steps, carry = int(carry), carry - int(carry)
-                trace = self.simulation.advance(steps)
-                window = self._window_rows()
-                self.buffer = np.concatenate([self.buffer, trace])[-window:]
-                message = self.simulation.status_message()
-                if message:
-                    self.running = False
-                    stopped = self.simulation
-            with self.gui_lock:
-                if not self._current(generation):
-                    return
-                self._draw()
-                if now >= next_readouts:
-                    self._refresh_live_readouts()
-                    next_readouts = now + LIVE_READOUT_PERIOD_S
-                if message and self.simulation is stopped and not self.running:   # not reset meanwhile
-                    self.status.content = f"**Stopped: {message}** Press Run or Reset to start again."
-                    self._notify_stop(message)
+            try:
+                carry, next_scene, next_readouts = self._frame(generation, now, elapsed, T, carry,
+                                                               next_scene, next_readouts)
+            except Exception as error:  # noqa: BLE001 - reported; the next frame goes on
+                self._problem("simulation", error)
+
+    def _frame(self, generation: int, now: float, elapsed: float, T: float, carry: float,
+               next_scene: float, next_readouts: float) -> tuple[float, float, float]:
+        """One display frame: advance, draw, 3D view; returns the carried state."""
+        period = SCENE_REFRESH[self.scene_refresh]
+        if self.scene is not None and period is not None and now >= max(next_scene, self.scene_quiet_until):
+            next_scene = now + period
+            with self.gui_lock:                   # the scene belongs to this generation only
+                if self._current(generation):
+                    try:
+                        self.scene.animate(now, self._latest())
+                    except Exception as error:  # noqa: BLE001 - the 3D view is not worth the simulation
+                        self._problem("3D view", error)
+        with self.lock:
+            if not self.running:
+                return carry, next_scene, next_readouts
+            time_scale = self.values.get("time_scale", 1.0)
+            carry += time_scale * elapsed / T
+            steps, carry = int(carry), carry - int(carry)
+            trace = self.simulation.advance(steps)
+            window = self._window_rows()
+            self.buffer = np.concatenate([self.buffer, trace])[-window:]
+            message = self.simulation.status_message()
+            if message:
+                self.running = False
+                stopped = self.simulation
+        with self.gui_lock:
+            if not self._current(generation):
+                return carry, next_scene, next_readouts
+            self._draw()
+            if now >= next_readouts:
+                self._refresh_live_readouts()
+                next_readouts = now + LIVE_READOUT_PERIOD_S
+            if message and self.simulation is stopped and not self.running:   # not reset meanwhile
+                self.status.content = f"**Stopped: {message}** Press Run or Reset to start again."
+                self._notify_stop(message)
+        return carry, next_scene, next_readouts
 
     def _notify_stop(self, message: str) -> None:
         """One 'Simulation stopped' card at a time: a new stop replaces the last card."""
@@ -458,23 +763,83 @@ class LabSession:
         return {"time_s": float(row[0]), **{name: float(row[column]) for name, column in self.columns.items()}}
 
     def _draw(self) -> None:
+        """Send the scope charts: only when new samples arrived, as float32, and only the
+        rows ``_scope_rows`` picks (the chart's pixel width, not the buffer's length)."""
         with self.lock:
             buffer = self.buffer
-        if len(buffer) < 2:
+        if len(buffer) < 2 or buffer[-1, 0] == getattr(self, "drawn_until", None):
             return
-        rows = buffer[::-1][:: max(1, len(buffer) // SCOPE_POINTS)][::-1]   # always with the newest sample
-        window_ms = self._window_rows() * self.simulation.sample_time_s * 1e3
-        rows, t_ms = scope.spanning(rows, window_ms)
-        self.window_ms = window_ms
-        for chart, handle, y_range in zip(self.exercise.charts, self.charts, self.y_ranges):
-            columns = [t_ms]
-            if chart.band:
-                centre, sigma = rows[:, self.columns[chart.band[0]]], rows[:, self.columns[chart.band[1]]]
-                scale = chart.series[0].scale
-                columns += [(centre + 3 * sigma) * scale, (centre - 3 * sigma) * scale]
-            columns += [rows[:, self.columns[s.column]] * s.scale for s in chart.series]
-            y_range.update(columns[1:])
-            handle.data = tuple(columns) + (scope.anchor(y_range.range, len(t_ms)),)
+        self.drawn_until = buffer[-1, 0]
+        sample_time = self.simulation.sample_time_s
+        self.window_ms = self._window_rows() * sample_time * 1e3
+        with self.client.atomic():                    # one wake-up of the event loop per frame, not per chart
+            for chart, handle, y_range in zip(self.exercise.charts, self.charts, self.y_ranges):
+                self._draw_chart(chart, handle, buffer, sample_time, y_range)
+
+    def _draw_chart(self, chart: Chart, handle, buffer: np.ndarray, sample_time: float,
+                    y_range: scope.StickyRange) -> None:
+        columns = [self.columns[s.column] for s in chart.series]
+        rows, t_ms = scope.spanning(buffer[_scope_rows(buffer, columns, sample_time)], self.window_ms)
+        ys = []
+        if chart.band:
+            centre, sigma = rows[:, self.columns[chart.band[0]]], rows[:, self.columns[chart.band[1]]]
+            scale = chart.series[0].scale
+            ys += [(centre + 3 * sigma) * scale, (centre - 3 * sigma) * scale]
+        ys += [rows[:, column] * s.scale for s, column in zip(chart.series, columns)]
+        x = t_ms.astype(np.float32) if _float32_resolves(t_ms, sample_time * 1e3) else t_ms
+        y_range.update(ys)
+        ys.append(scope.anchor(y_range.range, len(t_ms)))
+        data = (x, *(y.astype(np.float32) for y in ys))
+        # Straight to the wire: the handle's ``data`` setter would cast every column to float64.
+        handle._impl.props.data = data
+        handle._queue_update("data", data)
+
+
+def _scope_rows(buffer: np.ndarray, columns: list[int], sample_time_s: float,
+                buckets: int = SCOPE_BUCKETS) -> np.ndarray:
+    """Rows of the scope buffer to draw: the buffer's time span cut into ``buckets`` buckets
+    of whole samples, and in each the rows of the lowest and the highest value of the
+    roughest series among ``columns`` (largest mean step), plus the first and last rows.
+
+    Drawn as lines, these points trace the same envelope as every sample (a noisy trace
+    stays a band of the same height, a peak keeps its height), with at most ``2 buckets + 2``
+    points.  The buckets are aligned to absolute sample numbers, so a sample once chosen
+    stays chosen while the trace scrolls (no shimmer)."""
+    n = len(buffer)
+    size = -(-n // buckets)
+    if size <= 2:
+        return np.arange(n)
+    key = buffer[:, 0]
+    if len(columns) == 1:
+        if np.isfinite(buffer[:, columns[0]]).all():
+            key = buffer[:, columns[0]]
+    else:
+        recent = buffer[-ROUGHNESS_ROWS:, columns]
+        finite = np.isfinite(recent).all(axis=0)
+        if finite.any():
+            roughness = np.where(finite, np.abs(np.diff(recent, axis=0)).sum(axis=0), -1.0)
+            choice = buffer[:, columns[int(np.argmax(roughness))]]
+            if np.isfinite(choice).all():
+                key = choice
+    first = round(buffer[0, 0] / sample_time_s)
+    lead = first % size
+    padded = np.empty(lead + n + (-(lead + n)) % size)
+    padded[:lead], padded[lead:lead + n], padded[lead + n:] = key[0], key, key[-1]   # the edge rows' values
+    padded = padded.reshape(-1, size)
+    base = np.arange(len(padded)) * size - lead
+    low, high = base + padded.argmin(axis=1), base + padded.argmax(axis=1)
+    rows = np.empty(2 * len(base) + 2, dtype=np.intp)
+    rows[0], rows[-1] = 0, n - 1
+    rows[1:-1:2], rows[2:-1:2] = np.minimum(low, high), np.maximum(low, high)   # in time order
+    np.clip(rows, 0, n - 1, out=rows)
+    keep = np.empty(len(rows), dtype=bool)
+    keep[0], keep[1:] = True, rows[1:] != rows[:-1]
+    return rows[keep]
+
+
+def _float32_resolves(t_ms: np.ndarray, step_ms: float) -> bool:
+    """Whether float32 keeps times ``step_ms`` apart distinct (long runs need float64)."""
+    return bool(np.spacing(np.float32(np.abs(t_ms).max())) <= step_ms / 16)
 
 
 def _plot_chart(plot: Plot) -> tuple[tuple, dict]:

@@ -1,5 +1,6 @@
 """Linear analysis of the bearing-axis loop: closed-loop poles, noise-driven
-RMS values and the largest tolerable gain factor.
+RMS values, step responses, the frequency response's peak and the largest
+tolerable gain factor.
 
 The loop is assembled from the discrete plant model (eq. 1, 3-4, 12), a
 discrete controller and the *steady-state* Kalman filter of eq. 2, and
@@ -12,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import control
+import numba
 import numpy as np
 import scipy.linalg
 import scipy.optimize
@@ -114,6 +116,28 @@ def closed_loop(model: control.StateSpace, controller: control.StateSpace,
     return Loop(system, loop_states)
 
 
+def with_reference_filter(loop: Loop, reference_filter: control.StateSpace) -> Loop:
+    """The loop with the reference passed through a discrete SISO filter first
+    (set-point weighting, e.g. an I-PD: see ``controllers.pid.setpoint_filter``).
+
+    The filter's states are appended after the loop's and stay out of
+    ``loop_states``: they are outside the feedback, so they add no loop poles
+    (the filter is stable by construction)."""
+    sys, F = loop.system, reference_filter
+    A, B, C, D = (np.asarray(M, dtype=float) for M in (sys.A, sys.B, sys.C, sys.D))
+    Af, Bf, Cf, Df = (np.atleast_2d(np.asarray(M, dtype=float)) for M in (F.A, F.B, F.C, F.D))
+    j, n, nf = LOOP_INPUTS.index("reference_m"), A.shape[0], Af.shape[0]
+    b_r, d_r = B[:, j:j + 1], D[:, j:j + 1]
+    A_new = np.block([[A, b_r @ Cf], [np.zeros((nf, n)), Af]])
+    B_new = np.vstack([B, np.zeros((nf, B.shape[1]))])
+    B_new[:n, j:j + 1], B_new[n:, j:j + 1] = b_r @ Df, Bf
+    C_new = np.hstack([C, d_r @ Cf])
+    D_new = D.copy()
+    D_new[:, j:j + 1] = d_r @ Df
+    system = control.ss(A_new, B_new, C_new, D_new, sys.dt, inputs=LOOP_INPUTS, outputs=LOOP_OUTPUTS)
+    return Loop(system, loop.loop_states)
+
+
 def loop_poles(loop: Loop) -> np.ndarray:
     """Closed-loop poles (z-plane) of the states that take part in the feedback."""
     A = np.asarray(loop.system.A)[loop.loop_states, loop.loop_states]
@@ -161,6 +185,67 @@ def noise_spectrum(loop: Loop, input_variances: dict[str, float], frequencies_hz
     response = np.asarray(control.frequency_response(channels, omega, squeeze=False).complex)[0]   # (inputs, f)
     variances = np.array(list(input_variances.values()))
     return np.sqrt(np.sum(np.abs(response) ** 2 * (2.0 * T * variances)[:, None], axis=0))
+
+
+@numba.njit(cache=True, nogil=True)
+def _unit_step_outputs(A, b, C, d, n_samples):
+    """Outputs y_k = C x_k + d of x_{k+1} = A x_k + b, x_0 = 0 (a unit step at k = 0)."""
+    n, n_out = A.shape[0], C.shape[0]
+    x, work = np.zeros(n), np.zeros(n)
+    y = np.empty((n_samples, n_out))
+    for k in range(n_samples):
+        for r in range(n_out):
+            acc = d[r]
+            for c in range(n):
+                acc += C[r, c] * x[c]
+            y[k, r] = acc
+        for r in range(n):
+            acc = b[r]
+            for c in range(n):
+                acc += A[r, c] * x[c]
+            work[r] = acc
+        x[:] = work
+    return y
+
+
+def step_response(loop: Loop, input_name: str, n_samples: int) -> np.ndarray:
+    """Response of every loop output (``LOOP_OUTPUTS``, columns) to a unit step
+    on one input at sample 0, from rest: rows k = 0 ... n_samples - 1 (what
+    python-control's ``step_response`` returns, compiled: the trade-off sweeps
+    need hundreds of them)."""
+    sys = loop.system
+    j = LOOP_INPUTS.index(input_name)
+    A, B, C, D = (np.ascontiguousarray(np.asarray(M, dtype=float)) for M in (sys.A, sys.B, sys.C, sys.D))
+    return _unit_step_outputs(A, np.ascontiguousarray(B[:, j]), C, np.ascontiguousarray(D[:, j]), n_samples)
+
+
+def frequency_gain(loop: Loop, input_name: str, output_name: str, frequencies_hz) -> np.ndarray:
+    """|G(exp(j 2 pi f T))| of one input-output channel (as python-control's
+    ``frequency_response``, by one batched solve of (zI - A) x = b)."""
+    sys = loop.system
+    j, i = LOOP_INPUTS.index(input_name), LOOP_OUTPUTS.index(output_name)
+    A, B, C, D = (np.asarray(M, dtype=float) for M in (sys.A, sys.B, sys.C, sys.D))
+    z = np.exp(2j * np.pi * np.asarray(frequencies_hz, dtype=float) * sys.dt)
+    n = A.shape[0]
+    x = np.linalg.solve(z[:, None, None] * np.eye(n) - A, np.broadcast_to(B[:, j], (z.size, n))[..., None])
+    return np.abs(x[..., 0] @ C[i] + D[i, j])
+
+
+def peak_gain(loop: Loop, input_name: str, output_name: str, lowest_hz: float = 0.5,
+              points: int = 200) -> tuple[float, float]:
+    """Largest |G| of one channel between ``lowest_hz`` and the Nyquist
+    frequency, and where it occurs [Hz]: a log-spaced grid, then a bounded
+    search between the grid neighbours of the largest value."""
+    f = np.geomspace(lowest_hz, 0.5 / loop.system.dt, points)
+    gain = frequency_gain(loop, input_name, output_name, f)
+    k = int(np.argmax(gain))
+    bounds = np.log(f[max(k - 1, 0)]), np.log(f[min(k + 1, f.size - 1)])
+    found = scipy.optimize.minimize_scalar(
+        lambda log_f: -frequency_gain(loop, input_name, output_name, [np.exp(log_f)])[0],
+        bounds=bounds, method="bounded", options={"xatol": 1e-5})
+    if -found.fun > gain[k]:
+        return float(-found.fun), float(np.exp(found.x))
+    return float(gain[k]), float(f[k])
 
 
 def largest_gain_factor(rms_at_gain, bound: float, low: float = 0.05,

@@ -71,8 +71,65 @@ class Claim:
     def accept_text(self) -> str:
         """The accepted range as text, e.g. ``">= 75 %"`` or ``"2.9 ... 3.3 N/µm"``."""
         low, high = self.accept
+        if low is not None and low == high:
+            return f"= {low:g} {self.unit}".strip()
         if low is not None and high is not None:
             return f"{low:g} … {high:g} {self.unit}".strip()
         if low is not None:
             return f"≥ {low:g} {self.unit}".strip()
         return f"≤ {high:g} {self.unit}".strip()
+
+
+#: The line in a worksheet where the paper-vs-lab table is rendered.
+WORKSHEET_MARKER = "<!-- claims -->"
+PENDING = "…"
+
+
+def format_value(value: float | None) -> str:
+    """A lab value for a table: three significant digits, ``…`` while not yet measured."""
+    if value is None:
+        return PENDING
+    if not math.isfinite(value):
+        return "not finite"
+    if 1e4 <= abs(value) < 1e9:
+        return f"{value:,.0f}".replace(",", " ")
+    return f"{value:.3g}" if 1e-3 <= abs(value) < 1e5 or value == 0 else f"{value:.3e}"
+
+
+def status(claim: Claim, value: float | None) -> str:
+    """``pass``, ``deviation (holds)``, ``FAIL`` (or ``…`` while not yet measured)."""
+    if value is None:
+        return PENDING
+    if not claim.holds(value):
+        return "FAIL"
+    return "deviation (holds)" if claim.deviation else "pass"
+
+
+def _cell(text: str) -> str:
+    return text.replace("|", "\\|").replace("\n", " ")
+
+
+def markdown_table(claims: tuple[Claim, ...], values: list[float | None] | None = None) -> str:
+    """The paper-vs-lab table of a worksheet: one row per claim with the lab's
+    value (``…`` where ``values`` is None or has None: still being measured),
+    then the claims' notes (how it is measured; a deviation's reason) as a list."""
+    values = values if values is not None else [None] * len(claims)
+    rows = ["| source | claim | paper | lab | accepted | status |", "|---|---|---|---|---|---|"]
+    for claim, value in zip(claims, values):
+        lab = format_value(value) + (f" {claim.unit}" if value is not None and claim.unit else "")
+        quantity = claim.quantity + (f" (at {settings_text(claim.settings)})" if claim.settings else "")
+        rows.append("| " + " | ".join(_cell(text) for text in (
+            claim.source, quantity, claim.paper, lab, claim.accept_text(), status(claim, value))) + " |")
+    notes = [f"- *{claim.quantity}*{' (deviation)' if claim.deviation else ''}: {claim.note}"
+             for claim in claims if claim.note]
+    return "\n".join(rows + ([""] + notes if notes else []))
+
+
+def settings_text(settings: dict) -> str:
+    """Parameter overrides as ``name = value, ...``."""
+    return ", ".join(f"{name} = {value}" for name, value in settings.items())
+
+
+def render_worksheet(text: str, table: str) -> str:
+    """The worksheet with its marker line replaced by ``table``."""
+    return "\n".join(table if line.strip() == WORKSHEET_MARKER else line for line in text.split("\n"))

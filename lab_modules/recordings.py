@@ -8,8 +8,10 @@ file with a header line and one row per sample::
     time_s,reference_mm,measured_position_mm,coil_voltage_v
     0.000,14.8000,14.80213,22.354
 
-Time must increase strictly; every field must be a finite number.  A bad
-file raises ``ParameterError`` with one line naming the line and column.
+Time must increase strictly at an even pace (every interval within
+``SAMPLING_TOLERANCE`` of the median: no gaps); every field must be a finite
+number inside the rig's physical range (``RANGES``).  A bad file raises
+``ParameterError`` with one line naming the line and column.
 """
 
 from __future__ import annotations
@@ -27,6 +29,15 @@ COLUMNS = ("time_s", "reference_mm", "measured_position_mm", "coil_voltage_v")
 #: browser upload; 20 MB holds about 10 minutes at 1 kHz.
 MAX_BYTES = 20_000_000
 MIN_ROWS = 10
+#: Physical ranges of the columns (not in the paper; chosen to be generous but physical):
+#: the gap sensor spans the ball's travel, 0 ... 30 mm (the loop's touchdown limit is
+#: 30 mm, twice the operating gap of §3.3); the coil voltage stays within ±100 V
+#: (the equilibrium needs 22 V at R_c = 25 ohm; 100 V drives 4 A, twice eq. 2.14's
+#: largest current); time within one day.
+RANGES = {"time_s": (-86_400.0, 86_400.0), "reference_mm": (0.0, 30.0),
+          "measured_position_mm": (0.0, 30.0), "coil_voltage_v": (-100.0, 100.0)}
+#: Largest relative deviation of one sampling interval from the median interval.
+SAMPLING_TOLERANCE = 0.5
 
 
 @dataclass(frozen=True)
@@ -62,8 +73,9 @@ def to_csv(recording: Recording) -> str:
     return "\n".join(lines) + "\n"
 
 
-def parse(filename: str, content: bytes) -> Recording:
-    """Read and validate a recording; any problem -> ``ParameterError`` (one line)."""
+def parse(filename: str, content: bytes, min_rows: int = MIN_ROWS) -> Recording:
+    """Read and validate a recording (at least ``min_rows`` samples); any problem ->
+    ``ParameterError`` (one line)."""
     if len(content) > MAX_BYTES:
         raise ParameterError(f"{filename}: file is larger than {MAX_BYTES / 1e6:.0f} MB, "
                              "the largest recording accepted")
@@ -76,6 +88,7 @@ def parse(filename: str, content: bytes) -> Recording:
     header: list[str] | None = None
     header_line = 0
     rows: list[list[float]] = []
+    lines: list[int] = []                  # file line of each row
     for line_number, line in enumerate(io.StringIO(text), start=1):
         line = line.strip()
         if not line:
@@ -108,16 +121,31 @@ def parse(filename: str, content: bytes) -> Recording:
             if not math.isfinite(value):
                 raise ParameterError(f"{filename}, line {line_number}, column {column}: "
                                      f"{fields[i]!r} is not a finite number")
+            low, high = RANGES[column]
+            if not low <= value <= high:
+                raise ParameterError(f"{filename}, line {line_number}, column {column}: {fields[i]} is outside "
+                                     f"the rig's range {low:g} ... {high:g}")
             row.append(value)
         if rows and not row[0] > rows[-1][0]:
             raise ParameterError(f"{filename}, line {line_number}, column time_s: time {row[0]:g} s "
                                  f"does not increase (previous sample {rows[-1][0]:g} s)")
         rows.append(row)
+        lines.append(line_number)
     if header is None:
         raise ParameterError(f"{filename}: no header line; expected columns {', '.join(COLUMNS)}")
-    if len(rows) < MIN_ROWS:
-        raise ParameterError(f"{filename}: {len(rows)} data rows; at least {MIN_ROWS} are needed")
+    if len(rows) < min_rows:
+        where = f", line {lines[-1]}" if lines else ""
+        raise ParameterError(f"{filename}{where}: the file ends after {len(rows)} data rows; "
+                             f"at least {min_rows} are needed")
     data = np.array(rows)
+    intervals = np.diff(data[:, 0])
+    median = float(np.median(intervals))
+    uneven = np.flatnonzero(np.abs(intervals - median) > SAMPLING_TOLERANCE * median)
+    if uneven.size:
+        k = int(uneven[0]) + 1
+        raise ParameterError(f"{filename}, line {lines[k]}, column time_s: the interval "
+                             f"{intervals[k - 1]:.6g} s to the previous sample differs from the recording's "
+                             f"{median:.6g} s by more than {SAMPLING_TOLERANCE:.0%} (a gap or uneven sampling)")
     return Recording(time_s=data[:, 0], reference_m=data[:, 1] * 1e-3, measured_m=data[:, 2] * 1e-3,
                      coil_voltage_v=data[:, 3], metadata=metadata, name=filename)
 

@@ -8,6 +8,7 @@ from scipy.optimize import linear_sum_assignment
 
 from lab_modules import analysis
 from lab_modules.controllers.pid import pid
+from lab_modules.controllers.pid import setpoint_filter as pid_setpoint_filter
 from lab_modules.exercises.kalman_noise import EXERCISE, setup
 from lab_modules.loops import radial_axis_loop
 from lab_modules.loops.radial_axis_experiment import AxisSimulation
@@ -178,3 +179,69 @@ def test_noise_spectrum_integrates_to_the_lyapunov_variance(use_estimate):
     density = analysis.noise_spectrum(loop, variances, frequencies_hz) ** 2
     area = np.sum(0.5 * (density[1:] + density[:-1]) * np.diff(frequencies_hz))
     assert np.sqrt(area) == pytest.approx(analysis.noise_rms(loop, variances)["x_m"], rel=1e-6)
+
+
+# -- step responses, frequency-response peak, reference filter (trade-off sweeps) --------
+
+@pytest.mark.parametrize("use_estimate", [False, True])
+@pytest.mark.parametrize("input_name", ["reference_m", "disturbance_n"])
+def test_compiled_step_response_equals_python_control(use_estimate, input_name):
+    """``analysis.step_response`` (compiled recursion) = python-control's
+    ``step_response`` of the same loop, every output, to 1e-9 of its peak."""
+    loop = kalman_noise_setup(use_estimate=use_estimate).loop()
+    n = 2000
+    ours = analysis.step_response(loop, input_name, n)
+    j = analysis.LOOP_INPUTS.index(input_name)
+    theirs = control.step_response(loop.system[:, j], T=np.arange(n) * T).outputs   # (outputs, time)
+    theirs = np.asarray(theirs).reshape(len(analysis.LOOP_OUTPUTS), n).T
+    scale = np.max(np.abs(theirs), axis=0)
+    assert np.all(scale > 0)
+    assert np.max(np.abs(ours - theirs) / scale) <= 1e-9
+
+
+@pytest.mark.parametrize("use_estimate", [False, True])
+def test_peak_gain_is_the_largest_frequency_response(use_estimate):
+    """``analysis.peak_gain`` of force -> position: not below python-control's
+    magnitude anywhere on a dense grid (within 1e-6), and equal to it at the
+    frequency it reports; ``frequency_gain`` = python-control to 1e-9."""
+    loop = kalman_noise_setup(use_estimate=use_estimate).loop()
+    grid = np.geomspace(0.5, 0.499 / T, 4000)
+    j, i = analysis.LOOP_INPUTS.index("disturbance_n"), analysis.LOOP_OUTPUTS.index("x_m")
+    reference = control.frequency_response(loop.system[i, j], 2 * np.pi * grid).magnitude.ravel()
+    ours = analysis.frequency_gain(loop, "disturbance_n", "x_m", grid)
+    np.testing.assert_allclose(ours, reference, rtol=1e-9)
+    peak, at_hz = analysis.peak_gain(loop, "disturbance_n", "x_m")
+    assert peak >= reference.max() * (1 - 1e-6)
+    there = control.frequency_response(loop.system[i, j], [2 * np.pi * at_hz]).magnitude.ravel()[0]
+    assert there == pytest.approx(peak, rel=1e-9)
+
+
+@pytest.mark.parametrize("td", [1e-3, 3e-3])
+def test_setpoint_filter_makes_the_pid_an_i_pd(td):
+    """C(z) F(z) = C_I(z): the PID behind ``setpoint_filter`` passes the reference
+    through its integral part only (python-control frequency responses, 1e-8)."""
+    gain, ti, tau = 0.65, 0.05, td / 10
+    controller = pid(gain, ti, td, tau, T)
+    s = control.tf("s")
+    integral = control.c2d(gain / (ti * s), T, method="tustin")
+    omega = 2 * np.pi * np.geomspace(1.0, 9000.0, 50)
+    through = control.frequency_response(controller * pid_setpoint_filter(ti, td, tau, T), omega).complex.ravel()
+    expected = control.frequency_response(integral, omega).complex.ravel()
+    np.testing.assert_allclose(through, expected, rtol=1e-8)
+
+
+def test_reference_filter_changes_only_the_reference_channel():
+    """``with_reference_filter``: the reference channel becomes loop × filter
+    (python-control series), the other inputs and the loop poles are unchanged."""
+    axis = kalman_noise_setup(use_estimate=True)
+    loop = axis.loop()
+    F = pid_setpoint_filter(0.05, 3e-3, 3e-4, T)
+    filtered = analysis.with_reference_filter(loop, F)
+    omega = 2 * np.pi * np.geomspace(1.0, 9000.0, 40)
+    for name in analysis.LOOP_INPUTS:
+        j = analysis.LOOP_INPUTS.index(name)
+        ours = control.frequency_response(filtered.system[:, j], omega).complex
+        channel = loop.system[:, j] * F if name == "reference_m" else loop.system[:, j]
+        theirs = control.frequency_response(channel, omega).complex
+        np.testing.assert_allclose(np.asarray(ours), np.asarray(theirs), rtol=1e-7, atol=1e-18)
+    assert pole_distance(analysis.loop_poles(filtered), analysis.loop_poles(loop)) <= 1e-12

@@ -23,3 +23,4 @@ def test_bench_reports_every_figure():
     for key in ("realtime_factor_one_core", "realtime_factor_per_cpu_second", "realtime_factor_two_threads",
                 "parallel_speedup_two_threads", "cpu_time_per_wall_time_two_threads", "speedup_vs_filterpy_loop"):
         assert math.isfinite(result[key]) and result[key] > 0, key
+    assert result["thrust_liftoff"]["realtime_factor_one_core"] > 0

@@ -2,7 +2,8 @@
 
 ``pid`` returns a discrete ``control.StateSpace`` mapping the control error
 e [V] (reference minus fed-back position, in sensor volts) to the amplifier
-reference i_ref [V] (paper 000, §IV).  The simulation kernels only ever see
+reference i_ref [V] (paper 000, §IV); ``setpoint_filter`` is the reference
+filter that makes it an I-PD.  The simulation kernels only ever see
 matrices, so any discrete SISO controller (PID, lead-lag, the integral part
 of an LQG) plugs into the same loop; ``controller_step`` is their compiled
 step.
@@ -39,6 +40,31 @@ def pid(gain: float, integral_time_s: float, derivative_time_s: float,
     s = control.tf("s")
     continuous = gain * (1 + 1 / (integral_time_s * s)
                          + derivative_time_s * s / (derivative_filter_s * s + 1))
+    return control.ss(control.c2d(continuous, sample_time_s, method="tustin"))
+
+
+def setpoint_filter(integral_time_s: float, derivative_time_s: float, derivative_filter_s: float,
+                    sample_time_s: float) -> control.StateSpace:
+    """Reference filter that turns the PID into an I-PD (set-point weights b = c = 0).
+
+    An I-PD lets the reference act through the integral term only,
+
+        u = K/(T_I s) (r - y) - K (1 + T_D s / (tau s + 1)) y,
+
+    which is the ordinary PID C(s) acting on F(s) r - y with
+    F = C_I / C, C_I = K / (T_I s) its integral part:
+
+        F(s) = (tau s + 1) / ((T_I s + 1)(tau s + 1) + T_I T_D s^2),
+
+    independent of K.  Tustin-discretised like ``pid``, F(z) is exactly
+    C_I(z) / C(z) of the discrete PID, so the loop with this filter in front
+    is the discrete I-PD.  (Set-point weighting: Åström & Hägglund, *PID
+    Controllers*, 1995, §4.4; the lab adds it to test whether the LQG's mild
+    step response of paper 000 Fig. 8 comes from its structure, not from its
+    optimality.)"""
+    s = control.tf("s")
+    T_I, T_D, tau = integral_time_s, derivative_time_s, derivative_filter_s
+    continuous = (tau * s + 1) / ((T_I * s + 1) * (tau * s + 1) + T_I * T_D * s**2)
     return control.ss(control.c2d(continuous, sample_time_s, method="tustin"))
 
 

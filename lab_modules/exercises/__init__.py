@@ -148,6 +148,35 @@ class Exercise:
         """Parse an uploaded file; raise ``ParameterError`` with one line naming the row or column."""
         raise ParameterError(f"exercise {self.name!r} takes no data files")
 
+    def report_figures(self, values: dict) -> list:
+        """Figures (``matplotlib.figure.Figure``, no pyplot) that back the claims in
+        ``python -m app reproduce --html``; helpers in ``exercises/_figures.py``."""
+        return []
+
+
+def claim_run(exercise: Exercise, claim: Claim, overrides: dict | None = None) -> tuple:
+    """The headless run a claim is measured on: (exercise, settings, duration).  Claims
+    with the same key share one ``metrics`` call."""
+    settings = {**(overrides or {}), **claim.settings}
+    duration = claim.duration_s if claim.duration_s is not None else exercise.default_duration_s
+    return exercise.name, tuple(sorted(settings.items())), float(duration)
+
+
+def measure_claims(exercise: Exercise, overrides: dict | None = None,
+                   cache: dict | None = None) -> list[float]:
+    """Each claim's lab value, in order; each distinct run once (``cache`` keeps the
+    metrics across calls, keyed by ``claim_run``).  ``overrides`` (e.g. a seed) apply
+    to every run; a claim's own settings win."""
+    cache = {} if cache is None else cache
+    values = []
+    for claim in exercise.claims:
+        key = claim_run(exercise, claim, overrides)
+        if key not in cache:
+            _, settings, duration = key
+            cache[key] = exercise.metrics(exercise.resolve(dict(settings)), duration)
+        values.append(claim.value_in(cache[key]))
+    return values
+
 
 #: Exercise modules, in the order the lab lists them (each defines ``EXERCISE``).
 MODULES = (
@@ -158,6 +187,10 @@ MODULES = (
     "sensor_placement",
     "maglev_tracking",
     "maglev_tuning",
+    "thrust_liftoff",
+    "self_sensing",
+    "stiffness_map",
+    "adaptive_filter",
 )
 
 

@@ -22,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from lab_modules import analysis
+from lab_modules.claims import Claim
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
 from lab_modules.exercises._common import pid_from_values
 from lab_modules.loops.radial_axis_experiment import AxisSetup, AxisSimulation
@@ -152,11 +153,42 @@ def pairs(values) -> list[list[float]]:
     return [[float(v.real), float(v.imag)] for v in np.sort_complex(np.asarray(values, dtype=complex))]
 
 
+CLAIM_RUN_S = 0.5        # simulated seconds behind the claims (0.4 s of RMS window after 0.1 s start-up)
+CLAIMS = (
+    Claim("paper 000 §II, Fig. 3", "fed-back position RMS reduction (the signal the rig sees)", "about 80 %",
+          "fed_back_position_reduction_percent", (80, None), "%",
+          note="RMS of the control variable: the measurement with measured feedback, the filter's estimate "
+               "with estimated feedback (what the rig's Fig. 3 plots)", duration_s=CLAIM_RUN_S),
+    Claim("paper 000 §II, Fig. 3", "coil-current noise reduction", "about 80 %",
+          "current_noise_reduction_percent", (75, None), "%", duration_s=CLAIM_RUN_S),
+    Claim("paper 000 §II", "true rotor displacement reduction, nominal gains", "about 80 %",
+          "oscillation_reduction_percent", (40, None), "%", deviation=True,
+          note="no causal controller can cut the true motion by 80 % here (lower bound: the one-step "
+               "prediction error of the noise-matched filter); the lab's sensor lag T_mx and derivative "
+               "filter τ, not in the paper, move this figure", duration_s=CLAIM_RUN_S),
+    Claim("paper 000 §II", "true rotor displacement reduction near the measured loop's gain limit",
+          "about 80 %", "predicted_oscillation_reduction_percent", (60, None), "%", deviation=True,
+          note="at gain factor 1.3 the measured-feedback loop rings more, so the filter removes more; still "
+               "below the paper's figure, which describes the rig's signals. Steady-state RMS of the linear "
+               "loop (Lyapunov): this lightly damped loop makes time runs of a few seconds scatter by a few "
+               "percent with the seed",
+          settings={"gain_factor": 1.3}, duration_s=CLAIM_RUN_S),
+    Claim("lab bound (paper 000 §II)", "share of the possible true-motion reduction the filter reaches",
+          "—", "share_of_possible_reduction", (0.75, None), "",
+          note="(x_meas − x_est) / (x_meas − lower bound) on the steady-state RMS values of the linear loop",
+          duration_s=CLAIM_RUN_S),
+    Claim("paper 000 §II", "largest gain factor, estimated / measured feedback", "+75 % (1.75 ×)",
+          "max_gain_factor_ratio", (1.75, None), "×",
+          note=f"criterion: {GAIN_CRITERION}", duration_s=CLAIM_RUN_S),
+)
+
+
 class KalmanNoise(Exercise):
     name = "kalman_noise"
     title = "Kalman filter against sensor noise"
     worksheet = "kalman_noise.md"
     parameters = PARAMETERS
+    claims = CLAIMS
     charts = (
         Chart("Rotor position", "µm", (
             Series("measured", "x_measured_m", 1e6, "#b0b0b0"),
@@ -245,6 +277,15 @@ class KalmanNoise(Exercise):
                             disturbance_n=lambda latest, values: float(
                                 setup(values).inputs_at(latest["time_s"])[1]))
 
+    def report_figures(self, values: dict) -> list:
+        """Fig. 3 of paper 000 as the lab sees it: the scope with measured and with
+        estimated feedback (same noise), and where the rotor's motion lies in frequency."""
+        from lab_modules.exercises._figures import plot_figure, scope_figure
+        runs = [(f"{source} feedback", {**values, "feedback": source}) for source in ("measured", "estimated")]
+        return [scope_figure(self, runs, 0.3, "Scope, last 50 ms of 0.3 s: measured vs estimated feedback",
+                             window_s=0.05),
+                plot_figure(motion_spectrum(setup(values)))]
+
     def metrics(self, values: dict, duration_s: float) -> dict:
         axis = setup(values)
         n_steps = round(duration_s / T)
@@ -283,8 +324,13 @@ class KalmanNoise(Exercise):
             "current_noise_reduction_percent": 100.0 * (1.0 - current["estimated"] / current["measured"]),
             "predicted_rms_displacement_measured_feedback_um": predicted["measured"] * 1e6,
             "predicted_rms_displacement_estimated_feedback_um": predicted["estimated"] * 1e6,
+            "predicted_oscillation_reduction_percent":
+                100.0 * (1.0 - predicted["estimated"] / predicted["measured"]),
             "rms_displacement_lower_bound_um": floor * 1e6,
             "max_possible_reduction_percent": 100.0 * (1.0 - floor / predicted["measured"]),
+            # (x_meas - x_est) / (x_meas - lower bound), on the steady-state (Lyapunov) RMS values
+            "share_of_possible_reduction": (predicted["measured"] - predicted["estimated"])
+            / max(predicted["measured"] - floor, 1e-30),
             "steady_state_kalman_gain": K.tolist(),
             "closed_loop_poles": pairs(loop_z),
             "closed_loop_poles_rad_per_s": pairs(analysis.z_to_s(loop_z, T)),

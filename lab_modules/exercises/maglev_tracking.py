@@ -21,6 +21,7 @@ from dataclasses import replace
 import control
 import numpy as np
 
+from lab_modules.claims import Claim
 from lab_modules.controllers.feedback_linearisation import (
     GUARD_CURRENT_A,
     brunovsky_chain,
@@ -159,12 +160,30 @@ def rms_tracking_error_mm(trace: dict, start_s: float) -> float:
     return float(np.sqrt(np.mean((trace["x_true_m"] - trace["reference_m"])[after] ** 2)) * 1e3)
 
 
+CLAIMS = (
+    *(Claim("paper 004 eq. 2.28", f"feedback gain k{j + 1} for poles −60, −80, −100 rad/s", f"{paper:,}".replace(",", " "),
+            f"feedback_gain.{j}", (paper * 0.999, paper * 1.001), unit, duration_s=0.1)
+      for j, (paper, unit) in enumerate(((480_000, "1/s³"), (18_800, "1/s²"), (240, "1/s")))),
+    Claim("paper 004 §3.1.2, Fig. 3.2", "RMS tracking error after the 2 mm step (σ = 1 mm sensor noise)",
+          "measured and estimated position hunt about the reference", "step_tracking_rms_error_mm", (None, 0.6),
+          "mm", note="true gap against the reference, from 0.25 s after the step"),
+    Claim("paper 004 §3.1.3, Fig. 3.7", "RMS tracking error, 1 mm sine at 10 rad/s (σ = 1 mm)", "“adequately tracks”",
+          "sine_tracking_rms_error_mm", (None, 0.6), "mm"),
+    Claim("paper 004 §3.1.2, Fig. 3.3", "position error inside the filter's ±3σ, 2 mm step",
+          "inside", "position_error_within_3sigma_percent", (97, None), "%",
+          note="share of samples after the first 0.25 s (a consistent filter: 99.7 %)"),
+    Claim("paper 004 §3.1.2, Fig. 3.5", "velocity error inside the filter's ±3σ, 2 mm step",
+          "inside", "velocity_error_within_3sigma_percent", (97, None), "%"),
+)
+
+
 class MaglevTracking(Exercise):
     name = "maglev_tracking"
     title = "Maglev ball: feedback linearisation with an EKF"
     worksheet = "maglev_tracking.md"
     parameters = PARAMETERS
     default_duration_s = 1.5
+    claims = CLAIMS
     download_label = "Record a lead-lag run (CSV)"
     charts = (
         Chart("Gap x1", "mm", (
@@ -281,6 +300,12 @@ class MaglevTracking(Exercise):
             "status": chosen_sim.status_message() or "ok",
             "duration_s": float(chosen["time_s"][-1] + T) if chosen["time_s"].size else 0.0,
         }
+
+    def report_figures(self, values: dict) -> list:
+        """Figs. 3.2-3.5: the 2 mm step tracked, and the estimation errors inside their ±3σ bounds."""
+        from lab_modules.exercises._figures import scope_figure
+        return [scope_figure(self, [("", values)], self.default_duration_s, "2 mm step: gap and estimation "
+                             "errors with ±3σ bounds", charts=("Gap x1", "Position error ±3σ", "Velocity error ±3σ"))]
 
     def download(self, values: dict) -> tuple[str, bytes]:
         """A recording for ``maglev_tuning`` (§3.5): 1 s at rest on the positioning

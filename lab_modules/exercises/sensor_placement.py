@@ -43,6 +43,7 @@ import numpy as np
 import scipy.signal
 
 from lab_modules import analysis
+from lab_modules.claims import Claim
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
 from lab_modules.exercises._common import pid_from_values
 from lab_modules.loops.flexible_rotor_loop import (
@@ -317,12 +318,26 @@ def oscillation_frequency_hz(x_m: np.ndarray, window_s: float = 0.02) -> float:
     return float(f[np.argmax(power)])
 
 
+CLAIMS = (
+    Claim("paper 000 §I, Fig. 2", "external sensor (+60 mm): largest stable gain factor",
+          "unstable at the nominal gains", "max_gain_factor_external", (None, 1.0), "×"),
+    Claim("paper 000 §I, Fig. 2", "external sensor: the mode that turns unstable first",
+          "a bending mode whose node lies between bearing and sensor", "first_unstable_mode_external", (3, 3), "",
+          note="mode 1 is the rigid mode; mode 3's node lies between the bearing and the +60 mm sensor"),
+    Claim("paper 000 §I-II", "integrated (collocated) sensor: largest stable gain factor", "more than +75 %",
+          "max_gain_factor_collocated", (1.75, None), "×"),
+    Claim("paper 000 §II", "coil-current noise reduction by the filter, integrated sensor", "about 80 %",
+          "current_noise_reduction_collocated_percent", (75, None), "%"),
+)
+
+
 class SensorPlacement(Exercise):
     name = "sensor_placement"
     title = "Sensor placement on the flexible rotor"
     worksheet = "sensor_placement.md"
     parameters = PARAMETERS
     default_duration_s = 0.3
+    claims = CLAIMS
     charts = (
         Chart("Rotor position", "µm", (
             Series("reference", "reference_m", 1e6, "#7f7f7f"),
@@ -429,6 +444,11 @@ class SensorPlacement(Exercise):
     def retune(self, simulation: LoopSimulation, values: dict) -> LoopSimulation:
         return self.simulation(values).carry_on_from(simulation)
 
+    def report_figures(self, values: dict) -> list:
+        """Fig. 2's point: each mode's closed-loop damping against the sensor's position."""
+        from lab_modules.exercises._figures import plot_figure
+        return [plot_figure(plot) for plot in self._plots(values) if plot.title.startswith("Closed-loop damping")]
+
     def live_readouts(self, trace: dict[str, np.ndarray]) -> list[tuple[str, float, str]]:
         def rms(x):
             return float(np.sqrt(np.mean((x - np.mean(x)) ** 2)))
@@ -484,6 +504,8 @@ class SensorPlacement(Exercise):
             "rms_displacement_collocated_estimated_feedback_um": noise["estimated"]["x_bearing_m"] * 1e6,
             "rms_current_collocated_measured_feedback_a": noise["measured"]["current_a"],
             "rms_current_collocated_estimated_feedback_a": noise["estimated"]["current_a"],
+            "current_noise_reduction_collocated_percent":
+                100.0 * (1.0 - noise["estimated"]["current_a"] / noise["measured"]["current_a"]),
             "max_gain_factor_collocated_estimated_feedback":
                 largest_stable_gain({**values, "feedback": "estimated"}, 0.0)[0],
             "max_gain_factor_external_estimated_feedback":

@@ -13,11 +13,17 @@ from functools import cached_property
 
 import control
 import numpy as np
+import scipy.signal
 
 from lab_modules import analysis
 from lab_modules.estimators.kalman import KalmanFilter, pad_vector
 from lab_modules.loops import radial_axis_loop
 from lab_modules.plants.radial_bearing import RIG, BearingAxis
+
+#: The ``AxisSetup`` fields that the model and the filter depend on.
+FILTER_FIELDS = {"rig", "sensor_lag_s", "sensor_noise_m", "current_noise_a", "process_force_n",
+                 "process_current_a", "filter_q_velocity", "filter_q_current", "filter_r_position",
+                 "filter_r_current"}
 
 
 @dataclass(frozen=True)
@@ -45,6 +51,7 @@ class AxisSetup:
     reference_step_m: float = 0.0
     disturbance_step_n: float = 0.0
     step_period_s: float = 0.1
+    reference_filter: control.StateSpace | None = None   # discrete SISO filter on the reference (I-PD)
     rig: BearingAxis = RIG
 
     # -- the plant's true noise ------------------------------------------------
@@ -102,9 +109,12 @@ class AxisSetup:
         """The closed loop (steady-state filter) with the controller scaled by ``gain_factor``."""
         use_estimate = self.use_estimate if use_estimate is None else use_estimate
         state_gain = self.state_feedback_gain
-        return analysis.closed_loop(self.model, gain_factor * self.controller,
+        loop = analysis.closed_loop(self.model, gain_factor * self.controller,
                                     self.steady_state_filter[0], use_estimate,
                                     None if state_gain is None else gain_factor * state_gain)
+        if self.reference_filter is not None:
+            loop = analysis.with_reference_filter(loop, self.reference_filter)
+        return loop
 
     def loop_at_plant_input(self, gain_factor: float = 1.0) -> control.StateSpace:
         """Open loop L broken at the plant input (i_ref): plant, filter, controller and state
@@ -147,7 +157,15 @@ class AxisSetup:
         return self.reference_step_m * on, self.disturbance_step_n * on
 
     def with_changes(self, **changes) -> AxisSetup:
-        return replace(self, **changes)
+        """A copy with some fields changed; it keeps the model and the steady-state
+        filter already solved when none of the fields they depend on changed
+        (sweeps over controllers then solve the filter's Riccati equation once)."""
+        new = replace(self, **changes)
+        if not FILTER_FIELDS & changes.keys():
+            for name in ("model", "steady_state_filter", "displacement_floor_m"):
+                if name in self.__dict__:
+                    new.__dict__[name] = self.__dict__[name]
+        return new
 
 
 class AxisSimulation:
@@ -185,6 +203,12 @@ class AxisSimulation:
         self._u_limit = rig.current_limit_a / rig.amplifier_gain_a_per_v
         self.step = 0
         self.status = radial_axis_loop.OK
+        self._reference_filter = None                  # (numerator, denominator, filter state)
+        if setup.reference_filter is not None:
+            transfer = control.ss2tf(setup.reference_filter)
+            numerator, denominator = np.ravel(transfer.num[0][0]), np.ravel(transfer.den[0][0])
+            state = np.zeros(max(numerator.size, denominator.size) - 1)
+            self._reference_filter = (numerator, denominator, state)
 
     def retuned(self, setup: AxisSetup) -> AxisSimulation:
         """A simulation with new settings that carries on from this one's state
@@ -197,6 +221,9 @@ class AxisSimulation:
             new.filter._x[:], new.filter.P[:] = self.filter._x, self.filter.P
         if new.ctrl.shape == self.ctrl.shape:
             new.ctrl[:] = self.ctrl
+        if (new._reference_filter is not None and self._reference_filter is not None
+                and new._reference_filter[2].shape == self._reference_filter[2].shape):
+            new._reference_filter[2][:] = self._reference_filter[2]
         return new
 
     @staticmethod
@@ -227,6 +254,9 @@ class AxisSimulation:
         if self.status != radial_axis_loop.OK or n_steps <= 0:
             return np.empty((0, len(radial_axis_loop.TRACE_COLUMNS) + 1))
         reference, disturbance = self.inputs(n_steps)
+        if self._reference_filter is not None:
+            numerator, denominator, state = self._reference_filter
+            reference, state[:] = scipy.signal.lfilter(numerator, denominator, reference, zi=state)
         noise = self.noise(n_steps)
         trace = np.empty((n_steps, len(radial_axis_loop.TRACE_COLUMNS) + 1))
         kf = self.filter

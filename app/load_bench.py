@@ -1,0 +1,401 @@
+"""``python -m app bench --clients N [--workers W]``: a lecture hall of headless tabs.
+
+Starts the lab on loopback (through HAProxy with ``W`` workers when W > 1),
+then connects headless websocket clients that behave like browser tabs: each
+receives and decodes everything the lab sends (zstd + msgpack, with the binary
+arrays), sends a camera message on connect and every few seconds, and moves
+the position-noise slider every few seconds.  Clients are added in steps up
+to N; at each step every tab's scope updates per second, bytes per second and
+the server's CPU time (all its processes, HAProxy included, from ``/proc``)
+are measured over a fixed window.  The largest step at which every tab still
+gets ``MIN_UPDATES_PER_S`` scope updates per second is the capacity.  The run
+stops at the first step that fails, so it is bounded in time.
+
+``--breakdown`` also attributes the received bytes to message kinds (scope
+chart data, readouts, 3D view, ...).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import os
+import random
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.request
+from collections import Counter
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import msgspec
+import viser
+import websockets.asyncio.client
+import zstandard
+
+from lab_modules.exercises import get
+
+ROOT = Path(__file__).resolve().parent.parent
+PROTOCOL = f"viser-v{viser.__version__}"      # the subprotocol a viser client of this version offers
+MIN_UPDATES_PER_S = 20.0
+TARGET_BYTES_PER_S = 150e3
+CAMERA_PERIOD_S = 3.0                         # each tab sends a camera message this often ...
+SLIDER_EVERY = 3                              # ... and moves a slider with every third one (an analysis: ~0.1 s CPU)
+CONNECT_RATE_PER_S = 10.0                     # new tabs per second while ramping up
+SETTLE_S = 4.0                                # after the last new tab of a step, before measuring
+SLIDER_LABEL = "Position sensor noise"
+SLIDER_VALUES = (1.33, 2.0)
+WORKER_HEADER = "X-Lab-Worker"                # set by the generated HAProxy configuration
+
+
+def scope_titles(exercise_name: str) -> tuple[str, ...]:
+    """The titles of the exercise's scope charts as the session shows them."""
+    return tuple(f"{c.title} [{c.unit}]" for c in get(exercise_name).charts)
+
+
+def decode_frame(frame: bytes) -> tuple[list[dict], list[int], int]:
+    """One websocket frame of viser's wire format: (messages, binary buffer lengths,
+    compressed msgpack length).  The frame is [u64 msgpack length][u64 compressed
+    length][zstd msgpack][8-byte aligned binary buffers]."""
+    raw_len = int.from_bytes(frame[0:8], "little")
+    compressed_len = int.from_bytes(frame[8:16], "little")
+    inner = zstandard.ZstdDecompressor().decompress(frame[16:16 + compressed_len], max_output_size=raw_len)
+    payload = msgspec.msgpack.decode(inner)
+    return payload["messages"], list(payload["binaryBufferLengths"]), compressed_len
+
+
+def _binary_bytes(value, lengths: list[int]) -> int:
+    """Bytes of the binary buffers a decoded message refers to."""
+    if isinstance(value, dict):
+        if "__binary_index" in value and "dtype" in value:
+            return lengths[value["__binary_index"]]
+        return sum(_binary_bytes(v, lengths) for v in value.values())
+    if isinstance(value, (list, tuple)):
+        return sum(_binary_bytes(v, lengths) for v in value)
+    return 0
+
+
+@dataclass
+class Tab:
+    """One headless tab: a websocket client that receives and decodes what the lab sends."""
+
+    url: str
+    titles: tuple[str, ...]                   # scope chart titles
+    breakdown: bool = False
+    slider_every: int = SLIDER_EVERY           # 0: the tab never moves a slider
+    received_bytes: int = 0
+    scope_times: list[float] = field(default_factory=list)   # arrival of each update of the first scope chart
+    kind_bytes: Counter = field(default_factory=Counter)
+    kind_count: Counter = field(default_factory=Counter)
+    kinds: dict[str, str] = field(default_factory=dict)      # GUI uuid -> kind of element
+    slider: str | None = None
+    worker: str | None = None
+    connected: bool = False
+    closed: str | None = None                 # why the connection ended
+    scope_uuid: str | None = None
+
+    def _kind(self, message: dict) -> str:
+        kind = message["type"]
+        if kind == "GuiUpdateMessage":
+            return self.kinds.get(message["uuid"], "GUI update") + " update"
+        if kind.startswith("Gui") and "props" in message:
+            props = message["props"]
+            label = props.get("label") or props.get("title") or ""
+            if kind == "GuiUplotMessage":
+                self.kinds[message["uuid"]] = "scope chart" if label in self.titles else "static chart"
+                if label == self.titles[0]:
+                    self.scope_uuid = message["uuid"]
+            elif kind == "GuiMarkdownMessage":
+                self.kinds[message["uuid"]] = "markdown (readouts, status, tables)"
+            elif kind == "GuiSliderMessage" and label.startswith(SLIDER_LABEL):
+                self.slider = message["uuid"]
+            return "GUI set-up"
+        if kind.startswith("Scene") or kind.endswith("SceneNodeMessage") or "Mesh" in kind or "Label" in kind:
+            return "3D view"
+        return kind
+
+    def receive(self, frame: bytes, now: float) -> None:
+        self.received_bytes += len(frame)
+        messages, lengths, compressed = decode_frame(frame)
+        sizes = [len(msgspec.msgpack.encode(m)) for m in messages] if self.breakdown else None
+        total = sum(sizes) if sizes else 0
+        for index, message in enumerate(messages):
+            kind = self._kind(message)
+            if (message["type"] == "GuiUpdateMessage" and message["uuid"] == self.scope_uuid
+                    and "data" in message["updates"]):
+                self.scope_times.append(now)
+            if self.breakdown:
+                share = compressed * sizes[index] / total if total else 0.0
+                self.kind_bytes[kind] += share + _binary_bytes(message, lengths)
+                self.kind_count[kind] += 1
+        if self.breakdown:
+            self.kind_bytes["frame headers and padding"] += len(frame) - compressed - sum(lengths)
+
+    async def _inputs(self, connection, stop: asyncio.Event) -> None:
+        """A camera message at once and then, like a student, every few seconds a camera
+        message, and every third time also a slider move."""
+        turn = 0
+        await asyncio.sleep(random.uniform(0.0, 0.2))
+        while not stop.is_set():
+            angle = 0.1 * turn
+            camera = {"type": "ViewerCameraMessage", "wxyz": [1.0, 0.0, 0.0, 0.0],
+                      "position": [0.3 + angle, 0.3, 0.3], "fov": 1.0, "near": 0.01, "far": 100.0,
+                      "image_height": 768, "image_width": 386, "look_at": [0.0, 0.0, 0.0],
+                      "up_direction": [0.0, 0.0, 1.0]}
+            await connection.send(msgspec.msgpack.encode(camera))
+            if self.slider is not None and self.slider_every and turn % self.slider_every == self.slider_every - 1:
+                move = {"type": "GuiUpdateMessage", "uuid": self.slider,
+                        "updates": {"value": SLIDER_VALUES[turn // self.slider_every % 2]}}
+                await connection.send(msgspec.msgpack.encode(move))
+            turn += 1
+            with contextlib.suppress(asyncio.TimeoutError):
+                await asyncio.wait_for(stop.wait(), CAMERA_PERIOD_S * random.uniform(0.8, 1.2))
+
+    async def run(self, stop: asyncio.Event) -> None:
+        try:
+            async with websockets.asyncio.client.connect(
+                    self.url, subprotocols=[PROTOCOL], max_size=None, compression=None,
+                    open_timeout=60) as connection:
+                self.connected = True
+                self.worker = connection.response.headers.get(WORKER_HEADER)
+                inputs = asyncio.create_task(self._inputs(connection, stop))
+                try:
+                    while not stop.is_set():
+                        try:
+                            frame = await asyncio.wait_for(connection.recv(), 0.5)
+                        except TimeoutError:
+                            continue
+                        self.receive(frame, time.perf_counter())
+                finally:
+                    inputs.cancel()
+                    with contextlib.suppress(asyncio.CancelledError, websockets.ConnectionClosed):
+                        await inputs
+                self.closed = "stopped"
+        except (TimeoutError, OSError, websockets.WebSocketException) as error:
+            self.closed = f"{type(error).__name__}: {error}"
+
+    def rate(self, start: float, end: float) -> float:
+        """Scope updates per second in [start, end)."""
+        return sum(start <= t < end for t in self.scope_times) / (end - start)
+
+
+# -- the server under test ------------------------------------------------------------
+
+def process_tree(pid: int) -> list[int]:
+    """``pid`` and all its descendants (Linux ``/proc``)."""
+    children: dict[int, list[int]] = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
+            except (OSError, IndexError, ValueError):
+                continue
+            children.setdefault(ppid, []).append(int(entry.name))
+    tree, todo = [], [pid]
+    while todo:
+        current = todo.pop()
+        tree.append(current)
+        todo += children.get(current, [])
+    return tree
+
+
+def cpu_seconds(pids: list[int]) -> float:
+    """User + system CPU time [s] of processes so far (gone processes count 0)."""
+    total = 0
+    for pid in pids:
+        with contextlib.suppress(OSError):
+            fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+            total += int(fields[11]) + int(fields[12])
+    return total / os.sysconf("SC_CLK_TCK")
+
+
+def port_free(port: int, host: str = "127.0.0.1") -> bool:
+    with socket.socket() as s:
+        try:
+            s.bind((host, port))
+        except OSError:
+            return False
+    return True
+
+
+def wait_http(url: str, process: subprocess.Popen, timeout_s: float, log: Path) -> None:
+    deadline = time.time() + timeout_s
+    while True:
+        try:
+            urllib.request.urlopen(url, timeout=5).close()
+            return
+        except OSError:
+            if process.poll() is not None or time.time() > deadline:
+                raise RuntimeError(f"the lab server did not start: {log.read_text()[-2000:]}") from None
+            time.sleep(0.3)
+
+
+@contextlib.contextmanager
+def lab_server(port: int, workers: int, exercise: str, log: Path,
+               extra: tuple[str, ...] = (), timeout_s: float = 180.0) -> Iterator[subprocess.Popen]:
+    """The lab on ``127.0.0.1:port`` in a child process (one lab process, or ``serve --workers``)."""
+    command = [sys.executable, "-m", "app", "--host", "127.0.0.1", "--port", str(port), "--exercise", exercise]
+    if workers > 1:
+        command += ["serve", "--workers", str(workers)]
+    command += list(extra)
+    root = Path(os.environ.get("LAB_BENCH_ROOT", ROOT))   # another tree's lab, for before/after runs
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    with log.open("w") as out:
+        server = subprocess.Popen(command, cwd=root, stdout=out, stderr=subprocess.STDOUT, env=env)
+        try:
+            wait_http(f"http://127.0.0.1:{port}/", server, timeout_s, log)
+            yield server
+        finally:
+            server.terminate()
+            try:
+                server.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                server.kill()
+                server.wait()
+
+
+# -- the measurement ---------------------------------------------------------------
+
+@dataclass
+class Step:
+    clients: int
+    updates_min: float
+    updates_median: float
+    kbytes_per_s_median: float
+    kbytes_per_s_max: float
+    server_cores: float           # CPU seconds per wall second of all server processes
+    client_cores: float           # the same for this benchmark's own process (the tabs)
+    connected: int
+    updates: int                  # scope updates received by all tabs in the window
+    window_s: float
+
+    @property
+    def ok(self) -> bool:
+        return self.connected == self.clients and self.updates_min >= MIN_UPDATES_PER_S
+
+    def row(self) -> dict:
+        return {"clients": self.clients, "updates_per_s_min": round(self.updates_min, 1),
+                "updates_per_s_median": round(self.updates_median, 1),
+                "kB_per_s_median": round(self.kbytes_per_s_median, 1),
+                "kB_per_s_max": round(self.kbytes_per_s_max, 1),
+                "server_cores": round(self.server_cores, 3),
+                "server_core_percent_per_tab": round(100 * self.server_cores / self.clients, 2),
+                "server_cpu_ms_per_update": round(1e3 * self.server_cores * self.window_s / max(self.updates, 1), 3),
+                "server_core_percent_per_tab_at_25_per_s": round(
+                    100 * 25 * self.server_cores * self.window_s / max(self.updates, 1), 2),
+                "bench_client_cores": round(self.client_cores, 3),
+                "connected": self.connected, "ok": self.ok}
+
+
+async def _measure(url: str, steps: list[int], window_s: float, server_pid: int, titles: tuple[str, ...],
+                   breakdown: bool, report, all_steps: bool, slider_every: int) -> tuple[list[Step], list[Tab]]:
+    stop = asyncio.Event()
+    tabs: list[Tab] = []
+    tasks: list[asyncio.Task] = []
+    results: list[Step] = []
+    try:
+        for clients in steps:
+            while len(tabs) < clients:
+                tab = Tab(url, titles, breakdown, slider_every)
+                tabs.append(tab)
+                tasks.append(asyncio.create_task(tab.run(stop)))
+                await asyncio.sleep(1.0 / CONNECT_RATE_PER_S)
+            await asyncio.sleep(SETTLE_S)
+            pids = process_tree(server_pid)
+            server_cpu, own_cpu = cpu_seconds(pids), cpu_seconds([os.getpid()])
+            received = [t.received_bytes for t in tabs]
+            start = time.perf_counter()
+            await asyncio.sleep(window_s)
+            end = time.perf_counter()
+            server_cpu = cpu_seconds(pids) - server_cpu
+            own_cpu = cpu_seconds([os.getpid()]) - own_cpu
+            rates = [t.rate(start, end) for t in tabs]
+            rates_bytes = [(t.received_bytes - r) / (end - start) / 1e3 for t, r in zip(tabs, received)]
+            step = Step(clients, min(rates), statistics.median(rates), statistics.median(rates_bytes),
+                        max(rates_bytes), server_cpu / (end - start), own_cpu / (end - start),
+                        sum(t.connected and t.closed is None for t in tabs),
+                        sum(round(r * (end - start)) for r in rates), end - start)
+            results.append(step)
+            report(step)
+            if not step.ok and not all_steps:
+                break
+    finally:
+        stop.set()
+        await asyncio.gather(*tasks, return_exceptions=True)
+    return results, tabs
+
+
+def ramp(clients: int, steps: int) -> list[int]:
+    """Client counts of the steps up to ``clients``."""
+    return sorted({max(1, round(clients * (k + 1) / steps)) for k in range(steps)})
+
+
+def run(clients: int, workers: int, steps: int, window_s: float, exercise: str, port: int,
+        breakdown: bool, report=lambda step: None, all_steps: bool = False,
+        slider_every: int = SLIDER_EVERY) -> dict:
+    titles = scope_titles(exercise)
+    with tempfile.TemporaryDirectory() as scratch:
+        log = Path(scratch) / "server.log"
+        extra: tuple[str, ...] = ()
+        if workers > 1:
+            extra = ("--worker-ports", str(port + 1))
+        with lab_server(port, workers, exercise, log, extra) as server:
+            results, tabs = asyncio.run(_measure(f"ws://127.0.0.1:{port}", ramp(clients, steps), window_s,
+                                                 server.pid, titles, breakdown, report, all_steps,
+                                                 slider_every))
+    passing = [s.clients for s in results if s.ok]
+    result = {"exercise": exercise, "workers": workers, "window_s": window_s,
+              "camera_period_s": CAMERA_PERIOD_S, "slider_move_period_s": CAMERA_PERIOD_S * slider_every or None,
+              "machine_cores": os.cpu_count(), "load_average_1min": os.getloadavg()[0],
+              "steps": [s.row() for s in results],
+              "largest_clients_at_min_updates": max(passing, default=0),
+              "min_updates_per_s": MIN_UPDATES_PER_S, "target_bytes_per_s": TARGET_BYTES_PER_S}
+    if breakdown and tabs:
+        seconds = window_s + SETTLE_S
+        total = Counter()
+        for tab in tabs:
+            total.update(tab.kind_bytes)
+        # bytes of all received frames, all tabs, whole run: a tab's share per second of the run
+        result["bytes_by_kind_per_tab_run"] = {k: round(v / len(tabs)) for k, v in total.most_common()}
+        result["breakdown_note"] = (f"bytes per tab over the whole run (~{seconds:.0f} s of steady state "
+                                    "plus the start-up messages)")
+    return result
+
+
+def main(clients: int, workers: int, steps: int, window_s: float, exercise: str, port: int,
+         breakdown: bool, as_json: bool, all_steps: bool = False, slider_every: int = SLIDER_EVERY) -> int:
+    def report(step: Step) -> None:
+        if not as_json:
+            r = step.row()
+            print(f"  {r['clients']:4d} tabs: scope updates/s min {r['updates_per_s_min']:5.1f} "
+                  f"median {r['updates_per_s_median']:5.1f}; {r['kB_per_s_median']:6.1f} kB/s per tab; "
+                  f"server {r['server_cores']:.2f} cores = {r['server_core_percent_per_tab']:.2f} % of a core "
+                  f"per tab ({r['server_cpu_ms_per_update']:.2f} ms per update = "
+                  f"{r['server_core_percent_per_tab_at_25_per_s']:.2f} % at 25/s); bench clients {r['bench_client_cores']:.2f} cores"
+                  + ("" if step.ok else "  <- below target"), flush=True)
+
+    if not as_json:
+        moves = f"a slider move every ~{CAMERA_PERIOD_S * slider_every:.0f} s" if slider_every else "no slider moves"
+        print(f"{exercise}: {workers} worker(s), up to {clients} headless tabs ({moves}) "
+              f"(load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores at start)", flush=True)
+    try:
+        result = run(clients, workers, steps, window_s, exercise, port, breakdown, report, all_steps, slider_every)
+    except RuntimeError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 1
+    if as_json:
+        print(json.dumps(result, indent=2))
+    else:
+        print(f"largest step with every tab >= {MIN_UPDATES_PER_S:.0f} scope updates/s: "
+              f"{result['largest_clients_at_min_updates']} tabs")
+        if "bytes_by_kind_per_tab_run" in result:
+            print("bytes per tab by message kind (" + result["breakdown_note"] + "):")
+            for kind, value in result["bytes_by_kind_per_tab_run"].items():
+                print(f"  {kind:<45} {value / 1e3:9.1f} kB")
+    return 0

@@ -1,0 +1,220 @@
+"""Saved experiments: one SQLite file (standard library ``sqlite3``, WAL mode).
+
+An experiment is an exercise name, its parameter values and, for exercises
+that take one, the uploaded recording (file name and bytes).  Each has a
+short, readable code such as ``KN-7Q3M`` (two letters from the exercise
+name, four random characters without look-alikes such as 0/O and 1/I).
+
+Two kinds share the table: a tab's *autosave* (rewritten on every change,
+debounced by the tab) and a *saved* snapshot (the Save button, or
+``python -m app save``), which never changes.  Opening either code restores it.
+
+Durability: WAL with ``synchronous=NORMAL`` keeps every committed
+transaction across a killed process (SIGKILL); only a power loss can drop
+the newest commits.  Several server processes may share the file (WAL lets
+readers and one writer work at once; writers wait up to ``BUSY_TIMEOUT_S``).
+Recordings are stored once per content (SHA-256), so autosaving a tab with a
+20 MB recording does not rewrite it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import secrets
+import sqlite3
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+#: Characters of the random part of a code: no 0/O, 1/I/L look-alikes.
+CODE_ALPHABET = "ABCDEFGHJKMNPQRSTUVWXYZ23456789"
+CODE_RANDOM_CHARS = 4
+BUSY_TIMEOUT_S = 5.0
+DATABASE_NAME = "lab.sqlite3"
+
+SCHEMA = """
+CREATE TABLE IF NOT EXISTS recordings (
+    sha256 TEXT PRIMARY KEY,
+    content BLOB NOT NULL
+);
+CREATE TABLE IF NOT EXISTS experiments (
+    code TEXT PRIMARY KEY,
+    kind TEXT NOT NULL CHECK (kind IN ('autosave', 'saved')),
+    exercise TEXT NOT NULL,
+    parameters TEXT NOT NULL,
+    recording_name TEXT,
+    recording_sha256 TEXT REFERENCES recordings(sha256),
+    created REAL NOT NULL,
+    updated REAL NOT NULL
+);
+"""
+
+
+class StoreError(ValueError):
+    """A code is malformed or unknown, or the database cannot be used (one line)."""
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """One stored experiment.  ``parameters`` holds the values without ``data``;
+    ``recording`` is the uploaded file's bytes (None: the exercise's default)."""
+
+    code: str
+    kind: str
+    exercise: str
+    parameters: dict
+    recording_name: str | None = None
+    recording: bytes | None = None
+    updated: float = 0.0
+
+
+def default_data_dir() -> Path:
+    """``$XDG_DATA_HOME/amb-lab`` or ``~/.local/share/amb-lab``."""
+    base = os.environ.get("XDG_DATA_HOME") or Path.home() / ".local" / "share"
+    return Path(base) / "amb-lab"
+
+
+def code_prefix(exercise: str) -> str:
+    """Two letters from the exercise name: its first and last word's initials
+    (``kalman_noise`` -> ``KN``, ``lqg_vs_pid`` -> ``LP``)."""
+    words = [w for w in exercise.split("_") if w] or ["X"]
+    return (words[0][0] + (words[-1][0] if len(words) > 1 else words[0][-1])).upper()
+
+
+def normalise_code(text: str) -> str:
+    """A code as typed (any case, spaces, missing dash) in its stored form, or ``StoreError``."""
+    cleaned = "".join(str(text).split()).upper().replace("_", "-")
+    if "-" not in cleaned and len(cleaned) == 2 + CODE_RANDOM_CHARS:
+        cleaned = f"{cleaned[:2]}-{cleaned[2:]}"
+    prefix, sep, rest = cleaned.partition("-")
+    if not (sep and len(prefix) == 2 and prefix.isalpha() and len(rest) == CODE_RANDOM_CHARS
+            and all(c in CODE_ALPHABET for c in rest)):
+        shown = str(text).strip()[:40]
+        raise StoreError(f"{shown!r} is not an experiment code: expected two letters, a dash and "
+                         f"{CODE_RANDOM_CHARS} characters, e.g. KN-7Q3M")
+    return cleaned
+
+
+class Store:
+    """The experiments database; safe to share between threads of one process
+    (one connection behind a lock) and between processes (WAL)."""
+
+    def __init__(self, data_dir: Path | str | None = None):
+        directory = Path(data_dir) if data_dir is not None else default_data_dir()
+        try:
+            directory.mkdir(parents=True, exist_ok=True)
+        except OSError as error:
+            raise StoreError(f"data directory {str(directory)!r}: {error.strerror}") from None
+        self.path = directory / DATABASE_NAME
+        self._lock = threading.Lock()
+        try:
+            self._db = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_S, check_same_thread=False,
+                                       isolation_level=None)   # explicit transactions below
+            self._db.execute("PRAGMA journal_mode=WAL")
+            self._db.execute("PRAGMA synchronous=NORMAL")
+            self._db.execute("PRAGMA foreign_keys=ON")
+            self._db.executescript(SCHEMA)
+        except sqlite3.Error as error:
+            raise StoreError(f"database {str(self.path)!r}: {error}") from None
+
+    def close(self) -> None:
+        with self._lock:
+            self._db.close()
+
+    # -- writing ------------------------------------------------------------------
+    def save(self, exercise: str, parameters: dict, recording_name: str | None = None,
+             recording: bytes | None = None) -> str:
+        """A new saved (unchanging) experiment; returns its code."""
+        return self._insert("saved", exercise, parameters, recording_name, recording)
+
+    def new_autosave(self, exercise: str, parameters: dict, recording_name: str | None = None,
+                     recording: bytes | None = None) -> str:
+        """A new autosave slot for a tab; returns its code (update it with ``autosave``)."""
+        return self._insert("autosave", exercise, parameters, recording_name, recording)
+
+    def autosave(self, code: str, exercise: str, parameters: dict, recording_name: str | None = None,
+                 recording: bytes | None = None) -> None:
+        """Overwrite the autosave ``code`` (a saved snapshot is never overwritten)."""
+        now = time.time()
+        with self._lock, self._transaction():
+            sha = self._put_recording(recording)
+            cursor = self._db.execute(
+                "UPDATE experiments SET exercise=?, parameters=?, recording_name=?, recording_sha256=?, "
+                "updated=? WHERE code=? AND kind='autosave'",
+                (exercise, _encode(parameters), recording_name if sha else None, sha, now, code))
+            if cursor.rowcount != 1:
+                raise StoreError(f"{code} is not an autosave slot")
+
+    def _insert(self, kind, exercise, parameters, recording_name, recording) -> str:
+        now = time.time()
+        text = _encode(parameters)
+        with self._lock, self._transaction():
+            sha = self._put_recording(recording)
+            for _ in range(100):
+                code = f"{code_prefix(exercise)}-" + "".join(
+                    secrets.choice(CODE_ALPHABET) for _ in range(CODE_RANDOM_CHARS))
+                try:
+                    self._db.execute(
+                        "INSERT INTO experiments VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+                        (code, kind, exercise, text, recording_name if sha else None, sha, now, now))
+                    return code
+                except sqlite3.IntegrityError:   # the code is taken: draw another
+                    continue
+        raise StoreError(f"no free experiment code left for {exercise!r}")
+
+    def _put_recording(self, content: bytes | None) -> str | None:
+        if content is None:
+            return None
+        sha = hashlib.sha256(content).hexdigest()
+        self._db.execute("INSERT OR IGNORE INTO recordings VALUES (?, ?)", (sha, content))
+        return sha
+
+    def _transaction(self):
+        return _Transaction(self._db)
+
+    # -- reading ------------------------------------------------------------------
+    def load(self, code: str) -> Experiment:
+        """The experiment saved under ``code`` (typed in any case), or ``StoreError``."""
+        code = normalise_code(code)
+        with self._lock:
+            row = self._db.execute(
+                "SELECT e.code, e.kind, e.exercise, e.parameters, e.recording_name, r.content, e.updated "
+                "FROM experiments e LEFT JOIN recordings r ON r.sha256 = e.recording_sha256 "
+                "WHERE e.code = ?", (code,)).fetchone()
+        if row is None:
+            raise StoreError(f"no experiment is saved under {code}")
+        return Experiment(code=row[0], kind=row[1], exercise=row[2], parameters=json.loads(row[3]),
+                          recording_name=row[4], recording=row[5], updated=row[6])
+
+    def count(self) -> int:
+        with self._lock:
+            return self._db.execute("SELECT COUNT(*) FROM experiments").fetchone()[0]
+
+    def check(self) -> str:
+        """SQLite's integrity check ("ok" when the file is consistent)."""
+        with self._lock:
+            return self._db.execute("PRAGMA integrity_check").fetchone()[0]
+
+
+class _Transaction:
+    """BEGIN IMMEDIATE ... COMMIT (ROLLBACK on an exception)."""
+
+    def __init__(self, db: sqlite3.Connection):
+        self.db = db
+
+    def __enter__(self):
+        self.db.execute("BEGIN IMMEDIATE")
+
+    def __exit__(self, kind, error, trace):
+        self.db.execute("COMMIT" if kind is None else "ROLLBACK")
+        return False
+
+
+def _encode(parameters: dict) -> str:
+    """Parameter values as JSON (numpy scalars as plain numbers; ``data`` is not a parameter)."""
+    plain = {name: (value.item() if hasattr(value, "item") else value)
+             for name, value in parameters.items() if name != "data"}
+    return json.dumps(plain, sort_keys=True)

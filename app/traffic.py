@@ -1,0 +1,269 @@
+"""What one tab may send: its messages are read, checked and coalesced before
+viser acts on them, so one tab cannot starve the others.
+
+viser reads each connection's messages in ``viser.infra._infra._message_consumer``
+and hands every one to its handlers (GUI updates become thread-pool jobs).
+``install`` replaces that reader with ``_consumer`` below, which per connection
+
+- **coalesces GUI updates** (and camera moves): an update is passed on at once if the control had
+  none in the last ``COALESCE_S``; otherwise only the newest value is kept and
+  passed on when that interval is over.  A burst of 10,000 slider updates
+  costs their decoding and one dispatch per control per interval;
+- **checks uploads**: a declared size above ``MAX_UPLOAD_BYTES`` is refused
+  before any part is accepted, and parts beyond the declared size are dropped;
+- **answers invalid messages** (undecodable, or rejected by a handler) in the
+  tab through ``Traffic.report`` and logs one line per client, not per message.
+
+The origin check needs the websocket's request headers: ``headers`` finds
+them by client id.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import inspect
+import sys
+import threading
+import time
+from collections.abc import Callable
+
+import msgspec
+import viser
+import viser.infra._infra as infra
+from viser import _messages
+
+#: A control's updates are acted on at most once per this interval [s] (newest value wins).
+COALESCE_S = 0.02
+#: Largest upload accepted (the recordings' limit).
+MAX_UPLOAD_BYTES = 20_000_000
+#: Share of the event loop one connection's messages may take, and the burst it may take at once [s].
+LOOP_SHARE = 0.05
+LOOP_BURST_S = 0.02
+#: A connection yields the event loop to the others after this many messages in a row.
+YIELD_EVERY = 32
+#: Invalid messages from one client beyond this many are not reported again in its tab.
+REPORTS_PER_CLIENT = 5
+
+
+class Traffic:
+    """The per-client policy installed into one viser server."""
+
+    def __init__(self, server: viser.ViserServer, report: Callable[[int, str], None]):
+        self.server = server
+        self.report_to_tab = report        # (client id, one line): shown in that tab
+        self.logged: set[int] = set()
+        self.reported: dict[int, int] = {}
+        self.lock = threading.Lock()
+        self.stats = {"received": 0, "dispatched_updates": 0, "coalesced": 0, "invalid": 0, "refused_uploads": 0}
+
+    # -- lookups ------------------------------------------------------------------
+    def _connections(self) -> dict:
+        return self.server._websock_server._live_connections
+
+    def client_id_of(self, websocket) -> int | None:
+        for client_id, connection in tuple(self._connections().items()):
+            if connection is websocket:
+                return client_id
+        return None
+
+    def headers(self, client_id: int):
+        """The websocket request's headers of a connected client (None once it is gone)."""
+        connection = self._connections().get(client_id)
+        request = getattr(connection, "request", None)
+        return None if request is None else request.headers
+
+    def close(self, client_id: int, reason: str) -> None:
+        """Close a client's websocket (policy violation) from any thread or the event loop."""
+        connection = self._connections().get(client_id)
+        if connection is None:
+            return
+        loop = self.server._websock_server._background_event_loop
+        coroutine = connection.close(1008, reason[:120])
+        try:
+            running = asyncio.get_running_loop()
+        except RuntimeError:
+            running = None
+        if running is loop:
+            loop.create_task(coroutine)
+        else:
+            asyncio.run_coroutine_threadsafe(coroutine, loop)
+
+    # -- invalid input ----------------------------------------------------------------
+    def invalid(self, client_id: int | None, what: str) -> None:
+        """One bad message: a line in the server log (once per client) and in the tab (a few times)."""
+        with self.lock:
+            self.stats["invalid"] += 1
+            first = client_id not in self.logged
+            self.logged.add(client_id)
+            shown = self.reported.get(client_id, 0)
+            self.reported[client_id] = shown + 1
+        if first:
+            print(f"client {client_id}: invalid message ({what}); further ones from this client are not logged",
+                  file=sys.stderr, flush=True)
+        if client_id is not None and shown < REPORTS_PER_CLIENT:
+            self.report_to_tab(client_id, f"The lab ignored a message it could not use ({what}).")
+
+    def forget(self, client_id: int) -> None:
+        with self.lock:
+            self.logged.discard(client_id)
+            self.reported.pop(client_id, None)
+
+
+_installed: Traffic | None = None
+_original_consumer = infra._message_consumer
+_original_dispatch = infra.WebsockMessageHandler._handle_incoming_message
+
+
+def install(server: viser.ViserServer, report: Callable[[int, str], None]) -> Traffic:
+    """Put the per-tab policy in front of ``server``'s handlers (one server per process)."""
+    global _installed
+    _installed = Traffic(server, report)
+    infra._message_consumer = _consumer
+    infra.WebsockMessageHandler._handle_incoming_message = _guarded_dispatch
+    return _installed
+
+
+async def _guarded_dispatch(self, client_id, message) -> None:
+    """viser's dispatch, with a handler's exception reported instead of a traceback per message."""
+    try:
+        await _original_dispatch(self, client_id, message)
+    except Exception as error:   # a handler rejected the message's content
+        if _installed is None:
+            raise
+        _installed.invalid(client_id, f"{type(message).__name__}: {type(error).__name__} {str(error)[:80]}")
+
+
+def _describe_bytes(size: float) -> str:
+    return f"{size / 1e6:.1f} MB"
+
+
+class _Header(msgspec.Struct):
+    """The two fields that decide what happens to a message (the rest is decoded only if needed)."""
+
+    type: str
+    uuid: object = None
+
+
+_HEADER = msgspec.msgpack.Decoder(_Header)
+_COALESCED = {"GuiUpdateMessage", "ViewerCameraMessage"}
+
+
+async def _consumer(websocket, handle_message: Callable, message_class) -> None:
+    """viser's message reader with coalescing, upload limits, reports and a share of the
+    event loop per connection (see the module docstring)."""
+    traffic = _installed
+    if traffic is None:
+        await _original_consumer(websocket, handle_message, message_class)
+        return
+    loop = asyncio.get_running_loop()
+    client_id: int | None = None
+    pending: dict[str, bytes] = {}                # control uuid (or "camera") -> newest raw update
+    last_sent: dict[str, float] = {}              # control uuid -> loop time of its last dispatch
+    uploads: dict[str, list[int]] = {}            # transfer uuid -> [declared bytes, accepted bytes]
+    scheduled: set[str] = set()
+    allowance, refilled, count = LOOP_BURST_S, time.perf_counter(), 0
+
+    def decode(raw: bytes):
+        try:
+            return message_class.deserialize(raw)
+        except Exception as error:  # noqa: BLE001 - anything a hostile or broken client can send
+            traffic.invalid(client_id, f"undecodable: {type(error).__name__}")
+            return None
+
+    def dispatch(key: str) -> None:
+        scheduled.discard(key)
+        raw = pending.pop(key, None)
+        if raw is None:
+            return
+        last_sent[key] = loop.time()
+        message = decode(raw)
+        if isinstance(message, _messages.GuiUpdateMessage) and not isinstance(message.updates, dict):
+            traffic.invalid(client_id, "malformed GUI update")
+        elif message is not None:
+            traffic.stats["dispatched_updates"] += 1
+            handle_message(message)
+
+    def take(raw) -> None:
+        """Act on one message: coalesce, check, or pass on."""
+        if not isinstance(raw, bytes):
+            traffic.invalid(client_id, "a text frame")
+            return
+        try:
+            header = _HEADER.decode(raw)
+        except (msgspec.DecodeError, msgspec.ValidationError) as error:
+            traffic.invalid(client_id, f"undecodable: {str(error)[:60]}")
+            return
+        if header.type in _COALESCED:
+            if header.type == "ViewerCameraMessage":
+                key = "camera"                             # the newest view is all that matters
+            elif isinstance(header.uuid, str):
+                key = header.uuid
+            else:
+                traffic.invalid(client_id, "malformed GUI update")
+                return
+            if key in pending:
+                traffic.stats["coalesced"] += 1
+            pending[key] = raw                             # the newest value wins
+            wait = last_sent.get(key, -1e9) + COALESCE_S - loop.time()
+            if wait <= 0:
+                dispatch(key)
+            elif key not in scheduled:
+                scheduled.add(key)
+                loop.call_later(wait, dispatch, key)
+            return
+        message = decode(raw)
+        if message is None:
+            return
+        if isinstance(message, _messages.FileTransferStartUpload):
+            declared = message.size_bytes
+            if not isinstance(declared, int) or not isinstance(message.part_count, int) or declared < 0 \
+                    or message.part_count < 0:
+                traffic.invalid(client_id, "malformed upload")
+                return
+            if declared > MAX_UPLOAD_BYTES:
+                traffic.stats["refused_uploads"] += 1
+                if client_id is not None:
+                    traffic.report_to_tab(client_id, f"The file is {_describe_bytes(declared)}; the largest "
+                                                     f"accepted is {_describe_bytes(MAX_UPLOAD_BYTES)}.")
+                return
+            uploads[message.transfer_uuid] = [declared, 0]
+        elif isinstance(message, _messages.FileTransferPart):
+            budget = uploads.get(message.transfer_uuid)
+            content = message.content
+            if budget is None or not isinstance(content, bytes) or budget[1] + len(content) > budget[0]:
+                if budget is not None:
+                    uploads.pop(message.transfer_uuid, None)
+                    traffic.invalid(client_id, "upload parts beyond the declared size")
+                return
+            budget[1] += len(content)
+            if budget[1] == budget[0]:
+                uploads.pop(message.transfer_uuid, None)
+        handle_message(message)
+
+    while True:
+        raw = await websocket.recv()
+        began = time.perf_counter()
+        traffic.stats["received"] += 1
+        if client_id is None:
+            client_id = traffic.client_id_of(websocket)
+        take(raw)
+        # This connection's share of the event loop: beyond it, stop reading for a while
+        # (the client's sends back up in TCP), and let the other connections run regularly.
+        now = time.perf_counter()
+        allowance = min(LOOP_BURST_S, allowance + (began - refilled) * LOOP_SHARE) - (now - began)
+        refilled = now
+        count += 1
+        if allowance < 0:
+            await asyncio.sleep(-allowance / LOOP_SHARE)
+        elif count % YIELD_EVERY == 0:
+            await asyncio.sleep(0)
+
+
+def callback(function: Callable) -> Callable:
+    """An async GUI callback that runs ``function(event)`` inline on the event loop
+    (viser awaits coroutine callbacks instead of queueing them on its shared thread pool):
+    ``function`` must only record the event and return at once."""
+    async def on_event(event) -> None:
+        function(event)
+    assert not inspect.iscoroutinefunction(function)
+    return on_event

@@ -1,0 +1,162 @@
+"""Fuzzy-basis-function neural network (FBFNN) that maps an operating point
+(i, x) to a stiffness factor (paper 002, §D, eq. 32-33, Figs. 9-10).
+
+Layer 1 takes the normalised inputs u = (i / 1.5 A, x / 0.5 mm).  Layer 2 has one
+Gaussian rule per node of the 5×5 grid (Tables 2-3), μ_r = exp(-‖u - c_r‖² / σ_r²)
+(eq. 32).  Layer 3 is the fuzzy-basis-function output
+
+    y = Σ_r w_r μ_r / Σ_r μ_r                                   (eq. 33, reconstructed)
+
+whose weights w_r are the LSM factors at the nodes ("the consequent parameters
+w_i ... are from the process of parameter identification").  The paper trains the
+widths σ_r by steepest descent (Fig. 10); the lab does the same on the relative
+mean-square error (MSE divided by the variance of the targets, so one learning
+rate serves k_i and k_s), optionally the weights too.  The sum in eq. 33 did not
+survive the text; the normalised form is the standard fuzzy basis function
+(Wang & Mendel) and makes the network return w_r exactly at its node when the
+rules are narrow.
+
+Training data must lie between the nodes too: on the 25 nodes alone the error
+vanishes as σ → 0 (each node is then its own rule) and the map between nodes
+becomes a staircase.  The lab trains on the LSM factors of a 20×20 grid and tests
+on a 41×41 grid.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import njit
+
+from lab_modules.plants.axial_bearing import GRID_CURRENTS_A, GRID_POSITIONS_M
+
+CURRENT_SCALE_A = 1.5
+POSITION_SCALE_M = 0.5e-3
+#: Initial width: the node spacing in normalised inputs (0.5), the usual start.
+INITIAL_WIDTH = 0.5
+MIN_WIDTH, MAX_WIDTH = 0.05, 3.0
+
+
+def _node_centres() -> np.ndarray:
+    currents, positions = np.meshgrid(GRID_CURRENTS_A / CURRENT_SCALE_A, GRID_POSITIONS_M / POSITION_SCALE_M,
+                                      indexing="xy")
+    return np.stack([currents.ravel(), positions.ravel()], axis=1)   # row-major: rows x, columns i
+
+
+CENTRES = _node_centres()
+
+
+def normalise(current_a, position_m) -> np.ndarray:
+    """Network inputs (..., 2) of operating points in A and m."""
+    i, x = np.broadcast_arrays(np.asarray(current_a, float), np.asarray(position_m, float))
+    return np.stack([i / CURRENT_SCALE_A, x / POSITION_SCALE_M], axis=-1)
+
+
+@dataclass
+class FuzzyBasisNetwork:
+    """One output (k_i or k_s); ``weights`` in the output's unit."""
+
+    weights: np.ndarray                                   # (25,) rule consequents
+    widths: np.ndarray = field(default_factory=lambda: np.full(25, INITIAL_WIDTH))
+
+    @classmethod
+    def from_table(cls, table: np.ndarray, width: float = INITIAL_WIDTH) -> FuzzyBasisNetwork:
+        """Rules from a 5×5 table (rows x, columns i), all widths ``width``."""
+        return cls(np.asarray(table, float).ravel().copy(), np.full(25, float(width)))
+
+    def _basis(self, inputs: np.ndarray):
+        d2 = np.sum((inputs[:, None, :] - CENTRES[None]) ** 2, axis=-1)
+        mu = np.exp(-d2 / self.widths[None] ** 2)
+        total = np.sum(mu, axis=1, keepdims=True)
+        return mu / np.maximum(total, 1e-300), d2
+
+    def predict(self, current_a, position_m) -> np.ndarray:
+        inputs = normalise(current_a, position_m)
+        shape = inputs.shape[:-1]
+        phi, _ = self._basis(inputs.reshape(-1, 2))
+        return (phi @ self.weights).reshape(shape)
+
+    def rmse(self, current_a, position_m, target) -> float:
+        return float(np.sqrt(np.mean((self.predict(current_a, position_m) - np.asarray(target)) ** 2)))
+
+    def train(self, current_a, position_m, target, epochs: int, rate: float,
+              train_weights: bool = False) -> list[float]:
+        """Steepest descent (batch) on the relative MSE; returns the training RMSE per epoch."""
+        inputs = normalise(current_a, position_m).reshape(-1, 2)
+        target = np.asarray(target, float).ravel()
+        scale = max(float(np.var(target)), 1e-300)
+        history = []
+        for _ in range(int(epochs)):
+            phi, d2 = self._basis(inputs)
+            y = phi @ self.weights
+            error = y - target
+            history.append(float(np.sqrt(np.mean(error**2))))
+            # ∂y/∂σ_r = φ_r (w_r - y) · 2 d²_r / σ_r³ ;  ∂y/∂w_r = φ_r
+            dy_dsigma = phi * (self.weights[None] - y[:, None]) * (2.0 * d2 / self.widths[None] ** 3)
+            grad_sigma = 2.0 * (error @ dy_dsigma) / (error.size * scale)
+            if train_weights:
+                grad_w = 2.0 * (error @ phi) / (error.size * scale)
+                self.weights = self.weights - rate * grad_w * scale
+            self.widths = np.clip(self.widths - rate * grad_sigma, MIN_WIDTH, MAX_WIDTH)
+        return history
+
+    def copy(self) -> FuzzyBasisNetwork:
+        return FuzzyBasisNetwork(self.weights.copy(), self.widths.copy())
+
+
+def training_grid(n: int = 20) -> tuple[np.ndarray, np.ndarray]:
+    """Operating points (i [A], x [m]) of an n×n grid over the identified range."""
+    currents, positions = np.meshgrid(np.linspace(-1.5, 1.5, n), np.linspace(-0.5e-3, 0.5e-3, n), indexing="xy")
+    return currents.ravel(), positions.ravel()
+
+
+@njit(cache=True, nogil=True)
+def evaluate(current_a, position_m, centres, weights, widths):
+    """Eq. 32-33 at one operating point (for the compiled loop)."""
+    u0 = current_a / CURRENT_SCALE_A
+    u1 = position_m / POSITION_SCALE_M
+    num = 0.0
+    den = 0.0
+    for r in range(weights.size):
+        d2 = (u0 - centres[r, 0]) ** 2 + (u1 - centres[r, 1]) ** 2
+        mu = np.exp(-d2 / widths[r] ** 2)
+        num += weights[r] * mu
+        den += mu
+    if den <= 1e-300:
+        return 0.0
+    return num / den
+
+
+TEST_POINTS = 41           # the test grid: 41 × 41 operating points
+TRAINING_POINTS = 20       # the training grid: 20 × 20 (between and on the nodes)
+
+
+def test_grid(n: int = TEST_POINTS) -> tuple[np.ndarray, np.ndarray]:
+    return training_grid(n)
+
+
+@dataclass
+class TrainedPair:
+    """The two networks (k_i [N/A], k_s [N/m]) and their RMSE histories."""
+
+    ki: FuzzyBasisNetwork
+    ks: FuzzyBasisNetwork
+    ki_untrained: FuzzyBasisNetwork
+    ks_untrained: FuzzyBasisNetwork
+    ki_history: list[float]
+    ks_history: list[float]
+
+
+def stiffness_networks(ki_table: np.ndarray, ks_table: np.ndarray, ki_train: np.ndarray, ks_train: np.ndarray,
+                       epochs: int, rate: float, initial_width: float = INITIAL_WIDTH,
+                       train_weights: bool = False) -> TrainedPair:
+    """Networks from the node tables, widths trained on the LSM factors ``*_train``
+    of ``training_grid()`` (``epochs`` steps of steepest descent)."""
+    currents, positions = training_grid()
+    ki = FuzzyBasisNetwork.from_table(ki_table, initial_width)
+    ks = FuzzyBasisNetwork.from_table(ks_table, initial_width)
+    before = (ki.copy(), ks.copy())
+    ki_history = ki.train(currents, positions, ki_train, epochs, rate, train_weights)
+    ks_history = ks.train(currents, positions, ks_train, epochs, rate, train_weights)
+    return TrainedPair(ki, ks, *before, ki_history, ks_history)

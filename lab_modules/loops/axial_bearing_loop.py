@@ -1,0 +1,324 @@
+"""Closed loop of the axial bearing of paper 002 (Fig. 1, Fig. 4, Fig. 8), compiled.
+
+Plant: eq. 1-2 (vertical axis, m ẍ = F_Magnet(i, x) + F_St - m g), integrated by
+RK4 (two sub-steps per sample) with the coil current held over the sample; the
+sensor is the first-order lag of eq. 18 (T_Sen, K_Sen), its output carries white
+noise of variance var_sensor [V²].  Amplifier: ideal current source of gain 1 A/V
+with white current noise of variance var_process [A²] per sample (the "process
+noise" of §E; the filter's Q = var_process·b bᵀ models exactly this), limited to
+|i| ≤ i0 (a coil current cannot be negative).
+
+Controller (not in the paper; a lab choice): PID on the measured position,
+x_M / K_Sen, with derivative on the measurement (filtered, τ_D), gravity
+feed-forward m g / k_i(centre), and a first-order reference filter so that the
+moves between operating points do not saturate the amplifier.
+
+Four filters run side by side on the same measurements and currents (they do not
+act on the loop): 0 fixed k_i, k_s (centre values, §B); 1 scheduled by the FBFNN
+(§D, Fig. 8); 2 scheduled by the exact no-intercept LSM at the operating point;
+3 EKF with the force law eq. 1.  The operating point for scheduling is
+(commanded current, filter's own position estimate).
+
+The SISO ADALINE (eq. 24) identifies k_Magnet from (i, measured x) and a measured
+magnet force with white noise of σ_F (lab choice: the paper's target is the
+MISO ADALINE's force estimate).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from lab_modules.estimators.adaline import siso_step
+from lab_modules.estimators.fuzzy_basis_network import CENTRES, evaluate
+from lab_modules.estimators.scheduled_kalman import (
+    N_STATES,
+    correct,
+    model_matrices,
+    physics_vector,
+    predict_exact_force,
+    predict_linear,
+    process_noise,
+)
+from lab_modules.estimators.stiffness_identification import PAPER_STENCIL_A, PAPER_STENCIL_M, lsm_factors_at
+from lab_modules.plants.axial_bearing import AXIAL, force_shape, magnet_force, tangent_factors
+
+SAMPLE_TIME_S = 100e-6              # not in the paper (lab choice, §E gives none)
+SENSOR_LAG_S = 100e-6               # T_Sen, not in the paper
+SENSOR_GAIN_V_PER_M = 1000.0        # K_Sen = 1 V/mm, not in the paper
+VAR_PROCESS_A2 = 8e-5               # §E "process noise variance 8e-5 V", read as A² at 1 A/V
+VAR_SENSOR_V2 = 8.3e-5              # §E "measurement noise variance 8.3e-5 V/mm", read as V² at 1 V/mm
+Q_FORCE_N2 = 1e-2                   # q_F, "experimentally initialized" in the paper; lab choice
+TOUCHDOWN_M = 1.5e-3                # retainer bearing at 0.5 mm from the magnets (lab choice)
+RK4_SUBSTEPS = 2
+FILTERS = ("fixed", "fbfnn", "lsm", "ekf")
+N_FILTERS = len(FILTERS)
+
+COLUMNS = (
+    "x_true_m", "x_measured_m", "x_reference_m", "current_a", "magnet_force_n", "disturbance_n",
+    *[f"{f}_{q}" for f in FILTERS for q in ("x_m", "x_sigma_m", "force_n", "force_sigma_n")],
+    "ki_tangent_n_per_a", "ks_tangent_n_per_m", "ki_fbfnn_n_per_a", "ks_fbfnn_n_per_m",
+    "ki_lsm_n_per_a", "ks_lsm_n_per_m", "k_magnet_estimate", "k_magnet_true",
+)
+COLUMN = {name: j + 1 for j, name in enumerate(COLUMNS)}      # row index 0 is time
+
+
+def column(trace: np.ndarray, name: str) -> np.ndarray:
+    return trace[:, COLUMN[name]]
+
+
+@dataclass(frozen=True)
+class Segment:
+    """From ``start_s`` on: position reference, disturbance force F_St and the plant's k_Magnet factor."""
+
+    start_s: float
+    reference_m: float
+    disturbance_n: float
+    k_magnet_factor: float = 1.0
+
+
+@dataclass(frozen=True)
+class LoopSetup:
+    segments: tuple[Segment, ...]
+    period_s: float                      # the schedule repeats (live view); metrics run one period
+    load_ramp_s: float                   # a new disturbance force ramps in linearly over this time
+    fbfnn_ki: tuple[np.ndarray, np.ndarray]       # (weights [N/A], widths)
+    fbfnn_ks: tuple[np.ndarray, np.ndarray]       # (weights [N/m], widths)
+    gravity: float = AXIAL.gravity_m_per_s2
+    var_process_a2: float = VAR_PROCESS_A2
+    var_sensor_v2: float = VAR_SENSOR_V2
+    q_force_n2: float = Q_FORCE_N2
+    sensor_lag_s: float = SENSOR_LAG_S
+    feedback: str = "fbfnn"                   # "measured" or one of FILTERS
+    proportional_a_per_m: float = 4.0e3       # K_P = 4 A/mm
+    integral_time_s: float = 0.02
+    derivative_a_s_per_m: float = 18.0        # K_D
+    derivative_filter_s: float = 1e-3         # only with measured feedback
+    reference_filter_s: float = 0.01
+    adaline_rate: float = 0.0174              # η in (mm²/A²)²·A²/(N·mm²)... see adaline_rate_note
+    adaline_initial: float = 5.0              # k̂_Magnet at the start [N·mm²/A²]
+    force_noise_n: float = 0.0                # σ of the measured magnet force for the ADALINE
+    plant_force_walk_n2: float = 0.0          # a random-walk part of F_St in the plant (variance per sample)
+    k_magnet: float = AXIAL.k_magnet_n_m2_per_a2
+    filter_k_magnet: float = AXIAL.k_magnet_n_m2_per_a2   # what the filters' models assume
+    stencil_a: float = PAPER_STENCIL_A
+    stencil_m: float = PAPER_STENCIL_M
+
+    def physics(self) -> np.ndarray:
+        return physics_vector(AXIAL.mass_kg, SAMPLE_TIME_S, self.sensor_lag_s, SENSOR_GAIN_V_PER_M,
+                              self.gravity, self.var_process_a2, self.q_force_n2, self.var_sensor_v2,
+                              self.filter_k_magnet, AXIAL.nominal_gap_m, AXIAL.bias_current_a)
+
+    def schedule(self) -> np.ndarray:
+        return np.array([[s.start_s, s.reference_m, s.disturbance_n, s.k_magnet_factor] for s in self.segments])
+
+    def controller(self) -> np.ndarray:
+        k_i, _ = AXIAL.centre_factors()
+        source = -1 if self.feedback == "measured" else FILTERS.index(self.feedback)
+        return np.array([self.proportional_a_per_m, self.integral_time_s, self.derivative_a_s_per_m,
+                         self.derivative_filter_s, self.reference_filter_s,
+                         AXIAL.mass_kg * self.gravity / k_i, source])
+
+
+# state vector layout
+(S_T, S_X, S_V, S_XM, S_INTEGRAL, S_DERIV, S_PREV_MEAS, S_REF, S_ADALINE, S_STOPPED, S_CURRENT, S_WALK) = range(12)
+N_LOOP_STATE = 12
+
+
+@njit(cache=True, nogil=True)
+def _derivatives(x, v, xm, current, load, k_magnet, mass, gravity, gap, bias, sensor_lag, sensor_gain):
+    accel = (magnet_force(current, x, k_magnet, gap, bias) + load) / mass - gravity
+    return v, accel, (sensor_gain * x - xm) / sensor_lag
+
+
+@njit(cache=True, nogil=True)
+def run(n_steps, state, filter_z, filter_P, physics, schedule, period, load_ramp, controller, k_magnet_nominal,
+        stencil, fbf_ki_w, fbf_ki_s, fbf_ks_w, fbf_ks_s, centres, adaline, noise, out):
+    """Advance ``n_steps`` samples; writes rows (time, *COLUMNS) into ``out``;
+    returns the number of rows written (fewer after a touchdown)."""
+    T = physics[1]
+    mass, gravity = physics[0], physics[4]
+    sensor_lag, sensor_gain = physics[2], physics[3]
+    gap, bias = physics[9], physics[10]
+    A = np.zeros((N_STATES, N_STATES))
+    B = np.zeros((N_STATES, 2))
+    Q = np.zeros((N_STATES, N_STATES))
+    A_fixed = np.zeros((N_STATES, N_STATES))
+    B_fixed = np.zeros((N_STATES, 2))
+    Q_fixed = np.zeros((N_STATES, N_STATES))
+    ki0 = 4 * physics[8] * bias / gap**2
+    ks0 = 4 * physics[8] * bias**2 / gap**3
+    model_matrices(ki0, ks0, physics, A_fixed, B_fixed)
+    process_noise(physics, B_fixed, Q_fixed)
+    kp, ti, kd, tf, tr, i_ff = controller[0], controller[1], controller[2], controller[3], controller[4], controller[5]
+    feedback = int(controller[6])
+    h = T / RK4_SUBSTEPS
+    for k in range(n_steps):
+        if state[S_STOPPED] > 0:
+            return k
+        t = state[S_T]
+        # schedule (repeats with the period)
+        tau = t % period
+        seg = 0
+        for j in range(schedule.shape[0]):
+            if tau >= schedule[j, 0] - 1e-12:
+                seg = j
+        reference, load, k_factor = schedule[seg, 1], schedule[seg, 2], schedule[seg, 3]
+        if seg > 0:
+            previous = schedule[seg - 1, 2]
+        elif t >= period:
+            previous = schedule[schedule.shape[0] - 1, 2]     # the schedule wraps round
+        else:
+            previous = load
+        if load_ramp > 0.0 and tau - schedule[seg, 0] < load_ramp:
+            load = previous + (load - previous) * (tau - schedule[seg, 0]) / load_ramp
+        k_magnet = k_magnet_nominal * k_factor
+        load += state[S_WALK]
+        state[S_WALK] += noise[k, 3]
+        x, v, xm = state[S_X], state[S_V], state[S_XM]
+        y = xm + noise[k, 0]
+        x_meas = y / sensor_gain
+        # filters: correction with y(k)
+        for f in range(4):
+            correct(filter_z[f], filter_P[f], y, physics[7])
+        # controller: PID on the chosen position (derivative from the filter's velocity)
+        state[S_REF] += (reference - state[S_REF]) * T / tr
+        if feedback < 0:
+            position = x_meas
+            derivative = (tf * state[S_DERIV] + (x_meas - state[S_PREV_MEAS])) / (tf + T)
+            if t == 0.0:
+                derivative = 0.0
+            state[S_DERIV] = derivative
+            state[S_PREV_MEAS] = x_meas
+        else:
+            position = filter_z[feedback][0]
+            derivative = filter_z[feedback][1]
+        error = state[S_REF] - position
+        state[S_INTEGRAL] += error * T
+        command = i_ff + kp * (error + state[S_INTEGRAL] / ti) - kd * derivative
+        if command > bias:
+            command = bias
+            state[S_INTEGRAL] -= error * T          # anti-windup
+        elif command < -bias:
+            command = -bias
+            state[S_INTEGRAL] -= error * T
+        current = command + noise[k, 1]
+        if current > bias:
+            current = bias
+        elif current < -bias:
+            current = -bias
+        # ADALINE (SISO, paper units: A, mm, N)
+        force_true = magnet_force(current, x, k_magnet, gap, bias)
+        phi_mm = force_shape(current, position, gap, bias) * 1e-6
+        state[S_ADALINE] = siso_step(state[S_ADALINE], phi_mm, force_true + noise[k, 2], adaline[0])
+        # record (a posteriori estimates at k)
+        row = out[k]
+        row[0] = t
+        row[1] = x
+        row[2] = x_meas
+        row[3] = state[S_REF]
+        row[4] = current
+        row[5] = force_true
+        row[6] = load
+        for f in range(4):
+            row[7 + 4 * f] = filter_z[f][0]
+            row[8 + 4 * f] = np.sqrt(max(filter_P[f][0, 0], 0.0))
+            row[9 + 4 * f] = filter_z[f][2]
+            row[10 + 4 * f] = np.sqrt(max(filter_P[f][2, 2], 0.0))
+        kit, kst = tangent_factors(current, x, k_magnet, gap, bias)
+        row[23] = kit
+        row[24] = kst
+        # filters: prediction with the commanded current
+        # 0 fixed
+        predict_linear(filter_z[0], filter_P[0], A_fixed, B_fixed, Q_fixed, command)
+        # 1 FBFNN-scheduled
+        ki_f = evaluate(command, filter_z[1][0], centres, fbf_ki_w, fbf_ki_s)
+        ks_f = evaluate(command, filter_z[1][0], centres, fbf_ks_w, fbf_ks_s)
+        row[25] = ki_f
+        row[26] = ks_f
+        model_matrices(ki_f, ks_f, physics, A, B)
+        process_noise(physics, B, Q)
+        predict_linear(filter_z[1], filter_P[1], A, B, Q, command)
+        # 2 exact LSM
+        ki_l, ks_l = lsm_factors_at(command, filter_z[2][0], stencil[0], stencil[1], physics[8], gap, bias)
+        row[27] = ki_l
+        row[28] = ks_l
+        model_matrices(ki_l, ks_l, physics, A, B)
+        process_noise(physics, B, Q)
+        predict_linear(filter_z[2], filter_P[2], A, B, Q, command)
+        # 3 EKF, force law eq. 1
+        predict_exact_force(filter_z[3], filter_P[3], physics, command, A, B, Q)
+        row[29] = state[S_ADALINE]
+        row[30] = k_magnet * 1e6
+        # plant: RK4 over the sample, current held
+        for _ in range(RK4_SUBSTEPS):
+            d1 = _derivatives(x, v, xm, current, load, k_magnet, mass, gravity, gap, bias, sensor_lag, sensor_gain)
+            d2 = _derivatives(x + 0.5 * h * d1[0], v + 0.5 * h * d1[1], xm + 0.5 * h * d1[2], current, load,
+                              k_magnet, mass, gravity, gap, bias, sensor_lag, sensor_gain)
+            d3 = _derivatives(x + 0.5 * h * d2[0], v + 0.5 * h * d2[1], xm + 0.5 * h * d2[2], current, load,
+                              k_magnet, mass, gravity, gap, bias, sensor_lag, sensor_gain)
+            d4 = _derivatives(x + h * d3[0], v + h * d3[1], xm + h * d3[2], current, load,
+                              k_magnet, mass, gravity, gap, bias, sensor_lag, sensor_gain)
+            x += h / 6 * (d1[0] + 2 * d2[0] + 2 * d3[0] + d4[0])
+            v += h / 6 * (d1[1] + 2 * d2[1] + 2 * d3[1] + d4[1])
+            xm += h / 6 * (d1[2] + 2 * d2[2] + 2 * d3[2] + d4[2])
+        state[S_X], state[S_V], state[S_XM] = x, v, xm
+        state[S_CURRENT] = current
+        state[S_T] = t + T
+        if not np.isfinite(x) or abs(x) >= TOUCHDOWN_M:
+            state[S_STOPPED] = 1.0
+            return k + 1
+    return n_steps
+
+
+class LoopSimulation:
+    """The compiled loop, advanced block by block (the app's ``Simulation``)."""
+
+    sample_time_s = SAMPLE_TIME_S
+    columns = COLUMNS
+
+    def __init__(self, setup: LoopSetup, seed: int = 0):
+        self.setup = setup
+        self.rng = np.random.default_rng(seed)
+        self.state = np.zeros(N_LOOP_STATE)
+        self.state[S_ADALINE] = setup.adaline_initial
+        self.filter_z = np.zeros((N_FILTERS, N_STATES))
+        P0 = np.diag([20e-6, 1e-3, 1.0, 20e-3]) ** 2
+        self.filter_P = np.repeat(P0[None], N_FILTERS, axis=0)
+        self._arrays(setup)
+
+    def _arrays(self, setup: LoopSetup) -> None:
+        self.physics = setup.physics()
+        self.schedule = setup.schedule()
+        self.controller = setup.controller()
+        self.fbf = [np.ascontiguousarray(a, dtype=np.float64) for a in (*setup.fbfnn_ki, *setup.fbfnn_ks)]
+        self.stencil = np.array([setup.stencil_a, setup.stencil_m])
+        self.adaline = np.array([setup.adaline_rate])
+
+    def retuned(self, setup: LoopSetup) -> LoopSimulation:
+        """The same running loop with new settings (state, filters and noise stream kept)."""
+        self.setup = setup
+        self._arrays(setup)
+        return self
+
+    def advance(self, n_steps: int) -> np.ndarray:
+        noise = np.column_stack([
+            self.rng.normal(0.0, np.sqrt(self.setup.var_sensor_v2), n_steps),
+            self.rng.normal(0.0, np.sqrt(self.setup.var_process_a2), n_steps),
+            self.rng.normal(0.0, self.setup.force_noise_n, n_steps) if self.setup.force_noise_n > 0
+            else np.zeros(n_steps),
+            self.rng.normal(0.0, np.sqrt(self.setup.plant_force_walk_n2), n_steps)
+            if self.setup.plant_force_walk_n2 > 0 else np.zeros(n_steps)])
+        out = np.empty((n_steps, 1 + len(COLUMNS)))
+        n = run(n_steps, self.state, self.filter_z, self.filter_P, self.physics, self.schedule,
+                self.setup.period_s, self.setup.load_ramp_s, self.controller, self.setup.k_magnet, self.stencil,
+                self.fbf[0], self.fbf[1], self.fbf[2], self.fbf[3], CENTRES, self.adaline, noise, out)
+        return out[:n]
+
+    def status_message(self) -> str:
+        if self.state[S_STOPPED] > 0:
+            return f"Touchdown: the rotor reached the retainer bearing at ±{TOUCHDOWN_M * 1e3:g} mm."
+        return ""
+

@@ -1,0 +1,444 @@
+"""The compiled lift-off loop of the 281 kg thrust bearing (paper 003, Fig. 4, 6, 7).
+
+One call of ``run`` advances the loop by ``n_steps`` samples of T = 0.1 ms.
+Per sample k:
+
+1. sensor    z_k = x_k + V_k                                     (eq. 12)
+2. filter    correction with z_k (standard form of eq. 16-18; eq. 17's misprint
+             is explained in ``estimators.thrust_kalman``)
+3. feedback  the measured z_k or the estimate x̂_k; error e = r − feedback [m]
+4. PID       i_c = Kp e + I + D, D = Kd (e_k − e_{k−1}) / T (unfiltered backward
+             difference, or through a first-order filter τ_d), or D = −Kd v̂ on
+             the filter's velocity; clipped at the current limit; the
+             integral stops while the output is clipped and growing (anti-windup)
+5. current   coil current i from the command through G(s) (§3.1, ZOH), or i = i_c
+6. filter    prediction with the *measured* coil current i (eq. 14-15): G(s)
+             is outside the filter's model
+7. plant     one sample of eq. 5 (linear, exact ZOH) or of eq. 2-3 (nonlinear,
+             RK4), force disturbance f_dis held over the sample, gravity in the
+             vertical variant; the touchdown bearing stops the collar at
+             ±clearance (inelastic)
+
+The gains are in SI units here (Kp [A/m] ...); the exercise converts the
+paper's A/mm.  The kernel releases the GIL, so browser tabs run in parallel.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from functools import cached_property
+
+import numba
+import numpy as np
+import scipy.linalg
+import scipy.signal
+
+from lab_modules.estimators.kalman import STATE_SIZE, predict, update
+from lab_modules.estimators.thrust_kalman import H, ThrustFilterDesign
+from lab_modules.plants.thrust_bearing import GRAVITY_M_PER_S2, TABLE_1, ThrustBearing, discrete_current_loop
+
+OK, DIVERGED, TOUCHDOWN, NO_LIFTOFF = 0, 1, 2, 3
+JIT = {"nogil": True, "cache": True, "error_model": "numpy"}
+
+#: Columns written by ``run`` after its time column [s].
+KERNEL_COLUMNS = ("x_true_m", "x_measured_m", "x_estimated_m", "x_sigma_m", "velocity_true_m_per_s",
+                  "velocity_estimated_m_per_s", "current_command_a", "current_a", "kalman_gain_x",
+                  "estimation_error_m")
+#: Constant columns the simulation adds (lines on the scope).
+LINE_COLUMNS = ("touchdown_upper_m", "touchdown_lower_m", "current_limit_a", "current_limit_negative_a", "zero")
+TRACE_COLUMNS = KERNEL_COLUMNS + LINE_COLUMNS
+COLUMN = {name: i for i, name in enumerate(TRACE_COLUMNS)}
+
+#: The collar has lifted once it is this far from the stop it started on (not in the paper).
+LIFT_MARGIN_M = 0.05e-3
+#: Lift-off must happen within this time, or the run stops (not in the paper).
+MAX_REST_S = 0.5
+
+
+@numba.njit(**JIT)
+def _acceleration(x, i, f_ext, nonlinear, c):
+    """d²x/dt² [m/s²]: eq. 5 (linear) or eq. 2-3 (nonlinear); c = force constants
+    (m, k_i, |k_x|, i0, k_f, x0, smallest gap), f_ext = disturbance + gravity force [N]."""
+    m = c[0]
+    if not nonlinear:
+        return (c[1] * i + c[2] * x + f_ext) / m
+    i0, k_f, x0, g_min = c[3], c[4], c[5], c[6]
+    upper, lower = max(i0 + i, 0.0), max(i0 - i, 0.0)
+    gap_upper, gap_lower = max(x0 - x, g_min), max(x0 + x, g_min)
+    return (k_f * (upper * upper / (gap_upper * gap_upper) - lower * lower / (gap_lower * gap_lower))
+            + f_ext) / m
+
+
+@numba.njit(**JIT)
+def _rk4(s, i, f_ext, c, T):
+    """RK4 over one sample of (x, v) with the current and external force held."""
+    x, v = s[0], s[1]
+    a1 = _acceleration(x, i, f_ext, True, c)
+    x2, v2 = x + 0.5 * T * v, v + 0.5 * T * a1
+    a2 = _acceleration(x2, i, f_ext, True, c)
+    x3, v3 = x + 0.5 * T * v2, v + 0.5 * T * a2
+    a3 = _acceleration(x3, i, f_ext, True, c)
+    x4, v4 = x + T * v3, v + T * a3
+    a4 = _acceleration(x4, i, f_ext, True, c)
+    s[0] = x + T / 6.0 * (v + 2.0 * v2 + 2.0 * v3 + v4)
+    s[1] = v + T / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
+
+
+@numba.njit(**JIT)
+def run(n_steps, first_step, T, plant, constants, plant_A, plant_B_force, nonlinear, gravity_n,
+        coil, G_A, G_B, G_C, G_D, use_current_loop,
+        x_hat, P, A_f, B_f, C_f, Q_f, R_diag,
+        pid, gains, use_estimate, derivative_from_velocity,
+        noise, noise_sigma, clearance_m, memory, trace):
+    """Advance the loop by ``n_steps`` samples (module docstring).
+
+    Arrays are float64 and hold state in place where they say so.
+    plant (2,): true (x [m], v [m/s]); constants (7,): see ``_acceleration``;
+    plant_A (2x2), plant_B_force (2,): exact ZOH discretisation of eq. 5 for a force [N];
+    gravity_n: force of gravity on the axis (0 horizontal, −m g vertical);
+    coil (2,): state of G(s) (G_A 2x2, G_B, G_C (2,), G_D scalar); use_current_loop: False -> i = i_c;
+    x_hat, P, A_f, B_f, C_f, Q_f, R_diag: the filter, padded to ``STATE_SIZE``;
+    pid (3,): integral [A], previous error [m], derivative term [A];
+    gains (5,): Kp [A/m], Ki [A/(m s)], Kd [A s/m], derivative filter coefficient
+    τ_d/(τ_d + T), current limit [A];
+    noise (n_steps, 2): standard normal draws for the sensor and the force;
+    noise_sigma (2,): σ_v [m], σ_f [N];
+    memory (2,): lifted (0/1), samples spent resting on the start stop;
+    trace (n_steps, 1 + len(KERNEL_COLUMNS)) output.
+
+    Returns (status, steps_done)."""
+    y = np.empty(1)
+    gain = np.empty((1, STATE_SIZE))
+    work_x, work_P = np.empty(STATE_SIZE), np.empty((STATE_SIZE, STATE_SIZE))
+    Kp, Ki, Kd, alpha, limit = gains[0], gains[1], gains[2], gains[3], gains[4]
+    max_rest = MAX_REST_S / T
+    for k in range(n_steps):
+        # 1. sensor, 2. filter correction
+        z = plant[0] + noise_sigma[0] * noise[k, 0]
+        y[0] = z
+        update(x_hat, P, C_f, y, R_diag, gain, STATE_SIZE)
+        # 3. feedback, 4. PID
+        e = -(x_hat[0] if use_estimate else z)
+        if use_estimate and derivative_from_velocity:
+            raw_d = -Kd * x_hat[1]
+        else:
+            raw_d = Kd * (e - pid[1]) / T
+        pid[1] = e
+        pid[2] = alpha * pid[2] + (1.0 - alpha) * raw_d
+        wanted = Kp * e + pid[0] + pid[2]
+        command = min(max(wanted, -limit), limit)
+        if command == wanted or wanted * e < 0.0:
+            pid[0] += Ki * T * e
+        # 5. current loop
+        if use_current_loop:
+            i = G_C[0] * coil[0] + G_C[1] * coil[1] + G_D * command
+            c0 = G_A[0, 0] * coil[0] + G_A[0, 1] * coil[1] + G_B[0] * command
+            c1 = G_A[1, 0] * coil[0] + G_A[1, 1] * coil[1] + G_B[1] * command
+            coil[0], coil[1] = c0, c1
+        else:
+            i = command
+        trace[k, 0] = (first_step + k) * T
+        trace[k, 1] = plant[0]
+        trace[k, 2] = z
+        trace[k, 3] = x_hat[0]
+        trace[k, 4] = np.sqrt(max(P[0, 0], 0.0))
+        trace[k, 5] = plant[1]
+        trace[k, 6] = x_hat[1]
+        trace[k, 7] = command
+        trace[k, 8] = i
+        trace[k, 9] = gain[0, 0]
+        trace[k, 10] = x_hat[0] - plant[0]
+        # 6. filter prediction with the measured coil current
+        predict(x_hat, P, A_f, B_f, i, Q_f, work_x, work_P)
+        # 7. plant and touchdown bearing
+        f_ext = noise_sigma[1] * noise[k, 1] + gravity_n
+        if nonlinear:
+            _rk4(plant, i, f_ext, constants, T)
+        else:
+            force = constants[1] * i + f_ext
+            x_new = plant_A[0, 0] * plant[0] + plant_A[0, 1] * plant[1] + plant_B_force[0] * force
+            v_new = plant_A[1, 0] * plant[0] + plant_A[1, 1] * plant[1] + plant_B_force[1] * force
+            plant[0], plant[1] = x_new, v_new
+        contact = False
+        if plant[0] <= -clearance_m:
+            plant[0], plant[1], contact = -clearance_m, max(plant[1], 0.0), True
+        elif plant[0] >= clearance_m:
+            plant[0], plant[1], contact = clearance_m, min(plant[1], 0.0), True
+        if not (np.isfinite(plant[0]) and np.isfinite(plant[1]) and np.isfinite(x_hat[0])
+                and np.isfinite(P[0, 0])):
+            return DIVERGED, k + 1
+        if memory[0] == 0.0:
+            if clearance_m - abs(plant[0]) > LIFT_MARGIN_M:
+                memory[0] = 1.0
+            else:
+                memory[1] += 1.0
+                if memory[1] > max_rest:
+                    return NO_LIFTOFF, k + 1
+        elif contact:
+            return TOUCHDOWN, k + 1
+    return OK, n_steps
+
+
+@dataclass(frozen=True)
+class ThrustSetup:
+    """One lift-off experiment, SI units throughout (the exercise converts its sliders)."""
+
+    bearing: ThrustBearing = TABLE_1
+    proportional_a_per_m: float = 3e3             # Table 1: 3 A/mm
+    integral_a_per_m_s: float = 10e3              # 10 A/(mm s)
+    derivative_a_s_per_m: float = 22.0            # 0.022 A s/mm
+    derivative_filter_s: float = 0.0
+    current_limit_a: float = 10.0
+    use_estimate: bool = False
+    derivative_from_velocity: bool = False
+    current_loop: bool = True
+    nonlinear: bool = False
+    vertical: bool = False
+    sensor_noise_m: float = 5e-6
+    force_noise_n: float = 0.0
+    filter_q_n2: float = ThrustFilterDesign().process_noise_n2
+    filter_r_factor: float = 1.0
+    start_position_m: float = -0.75e-3
+    sensor_noise_correlation_s: float = 0.0        # > 0: first-order coloured sensor noise (std stays σ_v)
+    noise_on: bool = True                          # False: the same run without any noise draws
+
+    @property
+    def design(self) -> ThrustFilterDesign:
+        return ThrustFilterDesign(self.filter_q_n2, self.filter_r_factor * self.sensor_noise_m**2, self.bearing)
+
+    @property
+    def gravity_n(self) -> float:
+        """Gravity's force on the axis: the collar rests on the lower stop (x < 0) when vertical."""
+        return -self.bearing.mass_kg * GRAVITY_M_PER_S2 if self.vertical else 0.0
+
+    def with_changes(self, **changes) -> ThrustSetup:
+        return replace(self, **changes)
+
+
+@dataclass
+class ThrustSimulation:
+    """A running lift-off: ``advance`` returns rows (time, *TRACE_COLUMNS); ``status_message`` says why it stopped."""
+
+    setup: ThrustSetup
+    seed: int = 0
+    columns: tuple[str, ...] = TRACE_COLUMNS
+    step: int = 0
+    status: int = OK
+    explanation: str = ""                          # appended to the stop message (e.g. the linear verdict)
+    relaunch_s: float = 0.0                        # > 0: lift off again every relaunch_s (browser view)
+
+    def __post_init__(self):
+        self.sample_time_s = self.setup.bearing.sample_time_s
+        self.rng = np.random.default_rng(self.seed)
+        self._configure()
+        self.relaunch()
+
+    def relaunch(self) -> None:
+        """Back to the start: collar at rest at the start position, filter at X0 and P0
+        (§3), PID and current loop at rest."""
+        s, b = self.setup, self.setup.bearing
+        self.plant = np.array([s.start_position_m, 0.0])
+        self.coil = np.zeros(2)
+        self.filter = s.design.filter(x0=(s.start_position_m, 0.0))
+        self.pid = np.array([0.0, -s.start_position_m, 0.0])
+        resting = b.touchdown_clearance_m - abs(s.start_position_m) <= LIFT_MARGIN_M
+        self.memory = np.array([0.0 if resting else 1.0, 0.0])
+        self.launched_at = self.step
+
+    def _configure(self):
+        s, b = self.setup, self.setup.bearing
+        T = b.sample_time_s
+        Phi, _, Gamma = b.exact_discretisation()
+        self._plant = (Phi, Gamma)
+        self._current = discrete_current_loop(T)
+        self._gains = np.array([s.proportional_a_per_m, s.integral_a_per_m_s, s.derivative_a_s_per_m,
+                                s.derivative_filter_s / (s.derivative_filter_s + T), s.current_limit_a])
+        self._sigma = np.array([s.sensor_noise_m, s.force_noise_n]) if s.noise_on else np.zeros(2)
+        self._constants = b.force_constants()
+        self._lines = np.array([b.touchdown_clearance_m, -b.touchdown_clearance_m,
+                                s.current_limit_a, -s.current_limit_a, 0.0])
+
+    def retuned(self, setup: ThrustSetup) -> ThrustSimulation:
+        """The running experiment with new settings: plant, filter estimate and PID state carry on."""
+        kf = self.filter
+        self.setup = setup
+        design = setup.design
+        Phi, B_d, Q_d = design.matrices
+        kf.__init__(Phi, B_d, H, Q_d, [design.measurement_variance_m2], kf.x.copy(), kf.covariance.copy())
+        self._configure()
+        if not setup.noise_on:
+            self._sigma[:] = 0.0
+        return self
+
+    def advance(self, n_steps: int) -> np.ndarray:
+        if self.status != OK or n_steps <= 0:
+            return np.empty((0, 1 + len(self.columns)))
+        if self.relaunch_s <= 0.0:
+            return self._advance(n_steps)
+        period = max(round(self.relaunch_s / self.sample_time_s), 1)
+        parts, left = [], n_steps
+        while left > 0 and self.status == OK:
+            if self.step - self.launched_at >= period:
+                self.relaunch()
+            chunk = min(left, period - (self.step - self.launched_at))
+            parts.append(self._advance(chunk))
+            left -= chunk
+        return np.concatenate(parts)
+
+    def _advance(self, n_steps: int) -> np.ndarray:
+        s, b, kf = self.setup, self.setup.bearing, self.filter
+        noise = self.rng.standard_normal((n_steps, 2))
+        if s.sensor_noise_correlation_s > 0.0:
+            noise[:, 0] = self._colour(noise[:, 0], np.exp(-b.sample_time_s / s.sensor_noise_correlation_s))
+        trace = np.empty((n_steps, 1 + len(self.columns)))
+        G_A, G_B, G_C, G_D = self._current
+        status, done = run(n_steps, self.step, b.sample_time_s, self.plant, self._constants,
+                           self._plant[0], self._plant[1], s.nonlinear, s.gravity_n,
+                           self.coil, G_A, G_B, G_C, G_D, s.current_loop,
+                           kf._x, kf.P, kf.A, kf.B, kf.C, kf.Q, kf.R_diag,
+                           self.pid, self._gains, s.use_estimate, s.derivative_from_velocity,
+                           noise, self._sigma, b.touchdown_clearance_m, self.memory, trace)
+        trace[:done, 1 + len(KERNEL_COLUMNS):] = self._lines
+        self.step += done
+        self.status = status
+        return trace[:done]
+
+    def _colour(self, white: np.ndarray, a: float) -> np.ndarray:
+        """First-order (AR(1)) noise n_k = a n_{k-1} + sqrt(1 − a²) w_k, unit variance, continuing
+        from the previous chunk: sensor noise that is not white (paper §3.2's explanation of the
+        remaining error)."""
+        out, _ = scipy.signal.lfilter([np.sqrt(1.0 - a * a)], [1.0, -a], white,
+                                          zi=[a * getattr(self, "_coloured_last", self.rng.standard_normal())])
+        self._coloured_last = out[-1]
+        return out
+
+    def run(self, duration_s: float) -> dict[str, np.ndarray]:
+        """``duration_s`` of simulation as columns (and ``time_s``)."""
+        trace = self.advance(round(duration_s / self.sample_time_s))
+        out = {name: trace[:, 1 + j] for j, name in enumerate(self.columns)}
+        out["time_s"] = trace[:, 0]
+        return out
+
+    def status_message(self) -> str:
+        if self.status == OK:
+            return ""
+        t_ms = self.step * self.sample_time_s * 1e3
+        clearance_mm = self.setup.bearing.touchdown_clearance_m * 1e3
+        text = {DIVERGED: f"the simulation diverged at t = {t_ms:.1f} ms (a number is no longer finite).",
+                TOUCHDOWN: f"the collar touched down on the ±{clearance_mm:.2f} mm touchdown bearing "
+                           f"after lift-off, at t = {t_ms:.1f} ms.",
+                NO_LIFTOFF: f"no lift-off: the collar still rests on the touchdown bearing after "
+                            f"{MAX_REST_S * 1e3:.0f} ms."}[self.status]
+        return text + (" " + self.explanation if self.explanation else "")
+
+
+@dataclass(frozen=True)
+class LinearLoop:
+    """The loop of ``run`` on the linear plant, without saturation or stops, with the
+    steady-state filter gain K∞:  s_{k+1} = M s_k + N n_k,  y_k = C s_k + D n_k,
+    noise n = (sensor V [m], force f_dis [N]) per sample.
+
+    State: plant (x, v), G(s) (2, if on), integral, previous error, derivative term,
+    filter prediction (x̂, v̂) (if ``with_filter``).  Outputs: ``OUTPUTS``."""
+
+    M: np.ndarray
+    N: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+
+    def poles(self) -> np.ndarray:
+        """z-plane poles."""
+        return np.linalg.eigvals(self.M)
+
+    def stable(self) -> bool:
+        return bool(np.max(np.abs(self.poles())) < 1.0)
+
+    def output_std(self, sensor_noise_m: float, force_noise_n: float) -> dict[str, float]:
+        """Steady-state standard deviation of each output for white noise of these
+        standard deviations (discrete Lyapunov equation, scipy); inf when unstable."""
+        if not self.stable():
+            return {name: float("inf") for name in OUTPUTS}
+        per_sensor, per_force = self.unit_variances
+        var = sensor_noise_m**2 * per_sensor + force_noise_n**2 * per_force
+        return {name: float(np.sqrt(max(v, 0.0))) for name, v in zip(OUTPUTS, var)}
+
+    @cached_property
+    def unit_variances(self) -> tuple[np.ndarray, np.ndarray]:
+        """Output variances for unit white sensor noise and unit white force (the two add)."""
+        # the states span metres to amperes: balance M first (X = S X' S^T), or the solve is ill-conditioned
+        M, (scale, _) = scipy.linalg.matrix_balance(self.M, permute=False, separate=True)
+        out = []
+        for j in range(self.N.shape[1]):
+            n = self.N[:, j] / scale
+            X = scale[:, None] * scipy.linalg.solve_discrete_lyapunov(M, np.outer(n, n)) * scale[None, :]
+            out.append(np.einsum("ij,jk,ik->i", self.C, X, self.C) + self.D[:, j] ** 2)
+        return out[0], out[1]
+
+
+#: Outputs of ``LinearLoop``: true x, measured z, corrected estimate x̂ [m], current command [A].
+OUTPUTS = ("x_true_m", "x_measured_m", "x_estimated_m", "current_command_a")
+
+
+def linear_loop(setup: ThrustSetup, current_loop: bool | None = None, with_filter: bool = True) -> LinearLoop:
+    """``LinearLoop`` of ``setup`` (G(s) as set, or forced on/off by ``current_loop``).
+
+    Built by pushing unit vectors through one step written like the kernel's, so the
+    pole map and the noise analysis describe the loop that runs.  ``with_filter=False``
+    drops the filter's states (only allowed for measured feedback, where the filter
+    is outside the loop)."""
+    s, b = setup, setup.bearing
+    T = b.sample_time_s
+    with_g = s.current_loop if current_loop is None else current_loop
+    if not with_filter and s.use_estimate:
+        raise ValueError("the filter is inside the loop when the estimate is fed back")
+    Phi, _, Gamma = b.exact_discretisation()
+    G_A, G_B, G_C, G_D = discrete_current_loop(T)
+    Phi_f, B_f, _ = s.design.matrices
+    K = s.design.steady_state[0]
+    alpha = s.derivative_filter_s / (s.derivative_filter_s + T)
+    o = 4 if with_g else 2                         # index of the integral
+    n = o + 3 + (2 if with_filter else 0)
+
+    def step(state, noise):
+        x = state[:2]
+        g = state[2:4] if with_g else np.zeros(2)
+        integral, previous, d_term = state[o], state[o + 1], state[o + 2]
+        z = x[0] + noise[0]
+        x_pred = state[o + 3:o + 5] if with_filter else np.zeros(2)
+        x_corr = x_pred + K * (z - x_pred[0])
+        e = -(x_corr[0] if s.use_estimate else z)
+        raw_d = (-s.derivative_a_s_per_m * x_corr[1] if s.use_estimate and s.derivative_from_velocity
+                 else s.derivative_a_s_per_m * (e - previous) / T)
+        d_new = alpha * d_term + (1 - alpha) * raw_d
+        command = s.proportional_a_per_m * e + integral + d_new
+        i = G_C @ g + G_D * command if with_g else command
+        out = np.empty(n)
+        out[:2] = Phi @ x + Gamma * (b.current_stiffness_n_per_a * i + noise[1])
+        if with_g:
+            out[2:4] = G_A @ g + G_B * command
+        out[o], out[o + 1], out[o + 2] = integral + s.integral_a_per_m_s * T * e, e, d_new
+        if with_filter:
+            out[o + 3:o + 5] = Phi_f @ x_corr + B_f * i
+        return out, np.array([x[0], z, x_corr[0], command])
+
+    zero_state, zero_noise = np.zeros(n), np.zeros(2)
+    by_state = [step(column, zero_noise) for column in np.eye(n)]
+    by_noise = [step(zero_state, column) for column in np.eye(2)]
+    return LinearLoop(M=np.column_stack([r[0] for r in by_state]), N=np.column_stack([r[0] for r in by_noise]),
+                      C=np.column_stack([r[1] for r in by_state]), D=np.column_stack([r[1] for r in by_noise]))
+
+
+def liftoff_figures(trace: dict[str, np.ndarray], start_m: float, column: str = "x_true_m") -> dict:
+    """Overshoot [%] of the reference 0 relative to the start distance, peak time [s] and
+    2 % settling time [s] (last time outside ±2 % of the start distance)."""
+    t, x = trace["time_s"], trace[column]
+    if not t.size:
+        return {"overshoot_percent": float("nan"), "peak_time_s": float("nan"), "settling_time_s": float("nan")}
+    distance = abs(start_m) if start_m else 1.0
+    sign = 1.0 if start_m <= 0 else -1.0
+    peak = int(np.argmax(sign * x))
+    outside = np.nonzero(np.abs(x) > 0.02 * distance)[0]
+    settled = float(t[outside[-1] + 1]) if outside.size and outside[-1] + 1 < t.size else (
+        float("nan") if outside.size else float(t[0]))
+    return {"overshoot_percent": float(max(sign * x[peak], 0.0) / distance * 100.0),
+            "peak_time_s": float(t[peak]), "settling_time_s": settled}
