@@ -854,7 +854,7 @@ def _plot_chart(plot: Plot) -> tuple[tuple, dict]:
         viser.uplot.Series(label=label, stroke=color, width=1.5, points=viser.uplot.Series_Points(show=False))
         for label, _, color in plot.series)
     return (x, *ys), {
-        "series": series, "title": plot.title,
+        "series": series, "title": plot.title, "legend": viser.uplot.Legend(live=False), "padding": scope.PADDING,
         "axes": (viser.uplot.Axis(label=plot.x_label), viser.uplot.Axis(label=plot.y_label)),
         "scales": {"x": viser.uplot.Scale(time=False, **(LOG_SCALE if plot.log_x else {})),
                    "y": viser.uplot.Scale(auto=False, **(LOG_SCALE | _log_span(*ys) if plot.log_y else _span(*ys)))}}
@@ -907,7 +907,7 @@ def _pole_map(poles: dict[str, np.ndarray], title: str) -> tuple[tuple, dict]:
         viser.uplot.Series(label="Re s = 0", stroke="#000000", width=1, dash=(6.0, 4.0),
                            points=viser.uplot.Series_Points(show=False)),)
     return (x, *columns), {
-        "series": series, "title": title,
+        "series": series, "title": title, "legend": viser.uplot.Legend(live=False), "padding": scope.PADDING,
         "axes": (viser.uplot.Axis(label="Re s [rad/s]"), viser.uplot.Axis(label="Im s [rad/s]")),
         "scales": {"x": viser.uplot.Scale(time=False),
                    "y": viser.uplot.Scale(auto=False, min=-1.05 * reach, max=1.05 * reach)}}
