@@ -79,12 +79,13 @@ def _readout_table(page):
 def _scope_runs(page) -> bool:
     """The first scope chart's pixels change, or the run stopped (an unstable default
     setting is a lesson: the status line then says why)."""
-    chart = page.locator(".uplot").first
-    before = chart.screenshot()
+    charts = page.locator(".uplot:visible")          # the time axis stands still: a constant trace
+    shots = [charts.nth(i).screenshot() for i in range(min(charts.count(), 3))]   # draws the same
     deadline = time.time() + 15
     while time.time() < deadline:
         time.sleep(0.2)
-        if page.get_by_text("Stopped:").count() or chart.screenshot() != before:
+        if page.get_by_text("Stopped:").count() or \
+                [charts.nth(i).screenshot() for i in range(len(shots))] != shots:
             return True
     return False
 
