@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import viser
 
-from app import worksheets
+from app import layout, margins, scope, worksheets
 from app.access import token_matches
 from app.store import Store, StoreError
 from app.traffic import callback
@@ -56,6 +56,12 @@ SCOPE_ASPECT = 2.2                # width / height of a scope chart
 SETTLE_BEFORE_REMOVAL_S = 0.3     # an exercise switch waits this long between the last chart update and removal
 LOG_SCALE = {"distr": 3, "log": 10}   # uPlot's logarithmic scale
 LOG_DECADES = 4                   # a logarithmic plot shows at most this many decades
+#: What the number boxes beside the sliders do with unusual entries (the browser handles them, unseen
+#: by the server: issue 11, defect 10)
+NUMBER_BOX_HINT = ("*Number boxes: type a decimal point (1.5, not 1,5); a value beyond a slider's ends is "
+                   "set to the nearest end; an emptied box keeps the value in use.*")
+PANEL_TABS = (("Scope", viser.Icon.WAVE_SINE), ("Pole map", viser.Icon.CHART_DOTS),
+              ("Analysis", viser.Icon.CHART_LINE), ("Worksheet", viser.Icon.NOTEBOOK))
 LIGHT_DAMPING = 0.3               # poles below this damping always belong to the dominant view
 AUTOSAVE_AFTER_S = 1.0            # a tab's autosave is written this long after its last change
 TOKEN_ATTEMPTS = 5                # wrong class tokens before a tab is disconnected
@@ -292,7 +298,8 @@ class LabSession:
         time.sleep(SETTLE_BEFORE_REMOVAL_S)
         with self.gui_lock:
             self._check_open()
-            self.client.gui.reset()
+            self._clear_notification()                # the old exercise's stop message goes with it
+            layout.clear(self.client.gui, keep=(self.panel, self.beside, *self.tabs.values()))   # docks stay
             self.client.scene.reset()
             self._start(exercise, overrides, recording)
 
@@ -406,6 +413,7 @@ class LabSession:
             with gui.add_folder(group, expand_by_default=index == 0 or group in ("Controller", "Run")):
                 for parameter in parameters:
                     self.inputs[parameter.name] = self._add_input(parameter)
+        gui.add_markdown(NUMBER_BOX_HINT)
         self.error = gui.add_markdown("")
         if self.store is not None:
             with gui.add_folder("Saved experiment", expand_by_default=False):
@@ -419,46 +427,66 @@ class LabSession:
             self._show_codes()
 
         first = next(_analyses(self.exercise.analyse(dict(self.values))))
-        self.panel = panel = gui.add_panel()
-        with panel.add_tab("Scope", viser.Icon.WAVE_SINE):
+        self.shown_margins = margins.margin_view(self.exercise, dict(self.values))
+        first = margins.with_margins(first, self.shown_margins)
+        if getattr(self, "panel", None) is None:      # docked once per tab (see app/layout.py)
+            self.panel = gui.add_panel()
+            self.tabs = {name: self.panel.add_tab(name, icon) for name, icon in PANEL_TABS}
+            gui.main_panel.dock_left()                # both panels docked, the 3D view in between
+            gui.main_panel.set_width(CONTROL_WIDTH_PX)
+            self.panel.dock_right()
+            self.panel.set_width(PANEL_WIDTH_PX)
+            # The worksheet can also take the 3D view's place, beside the charts (self-paced work).
+            self.beside = gui.add_panel(visible=self.worksheet_beside)
+            self.tabs["beside"] = self.beside.add_tab("Worksheet", viser.Icon.NOTEBOOK)
+            self.beside.float(x=0, y=0, width=CANVAS_PX[0], height=CANVAS_PX[1])   # over the 3D view
+            if self.worksheet_beside:
+                self.tabs.pop("Worksheet").remove()
+        beside = self.beside
+        with self.tabs["Scope"]:
+            self.window_ms = self._window_rows() * self.simulation.sample_time_s * 1e3
+            self.y_ranges = [scope.StickyRange() for _ in self.exercise.charts]
             self.charts = [self._add_chart(chart) for chart in self.exercise.charts]
             self.readouts = gui.add_markdown("*computing …*")
-        with panel.add_tab("Pole map", viser.Icon.CHART_DOTS):
+        with self.tabs["Pole map"]:
             dominant, full = _pole_charts(first.poles)
             self.pole_plots = tuple(gui.add_uplot(data, **options, aspect=1.6) for data, options in (dominant, full))
             gui.add_markdown("Poles in the s-plane (discrete poles mapped by s = ln z / T); the dashed line is "
                              "the imaginary axis, right of it is unstable. The first map leaves out the fast, "
                              "well-damped poles (sensor lag, amplifier) that squash the second.")
             self.pole_table = gui.add_markdown("")
-        if first.plots:
-            with panel.add_tab("Analysis", viser.Icon.CHART_LINE):
-                self.plots = []
-                for plot in first.plots:
-                    data, options = _plot_chart(plot)
-                    self.plots.append(gui.add_uplot(data, **options, aspect=2.0))
-        else:
+        with self.tabs["Analysis"]:
             self.plots = []
+            for plot in first.plots:
+                data, options = _plot_chart(plot)
+                self.plots.append(gui.add_uplot(data, **options, aspect=2.0))
+            if not first.plots:
+                gui.add_markdown("*This exercise has no analysis plots.*")
         worksheet = worksheets.current(self.exercise)    # claims table filled in as it is measured
-        with panel.add_tab("Worksheet", viser.Icon.NOTEBOOK):
-            sheets = [gui.add_markdown(worksheet)]
-        gui.main_panel.dock_left()                    # both panels docked, the 3D view in between
-        gui.main_panel.set_width(CONTROL_WIDTH_PX)
-        panel.dock_right()
-        panel.set_width(PANEL_WIDTH_PX)
-        # The worksheet can also take the 3D view's place, beside the charts (self-paced work).
-        beside = gui.add_panel(visible=self.worksheet_beside)
-        with beside.add_tab("Worksheet", viser.Icon.NOTEBOOK):
-            sheets.append(gui.add_markdown(worksheet))
-        beside.float(x=0, y=0, width=CANVAS_PX[0], height=CANVAS_PX[1])   # over the 3D view, docks untouched
+        sheets = {}
+        if "Worksheet" in self.tabs:
+            with self.tabs["Worksheet"]:
+                sheets["tab"] = gui.add_markdown(worksheet)
+        with self.tabs["beside"]:
+            sheets["beside"] = gui.add_markdown(worksheet)
 
         def show_beside(_event) -> None:
-            self.worksheet_beside = beside.visible = toggle.value
+            """The worksheet is in one place at a time: beside the charts or in their tabs."""
+            with self.gui_lock:
+                self.worksheet_beside = beside.visible = toggle.value
+                if toggle.value and "Worksheet" in self.tabs:
+                    self.tabs.pop("Worksheet").remove()
+                    sheets.pop("tab", None)
+                elif not toggle.value and "Worksheet" not in self.tabs:
+                    self.tabs["Worksheet"] = self.panel.add_tab(*PANEL_TABS[-1])
+                    with self.tabs["Worksheet"]:
+                        sheets["tab"] = gui.add_markdown(sheets["beside"].content)
         toggle.on_update(self._on("beside", lambda: show_beside(None)))
 
         def show_measured(sheet: str, generation: int = self.generation) -> None:
             with self.gui_lock:
                 if self._current(generation):
-                    for handle in sheets:
+                    for handle in sheets.values():
                         handle.content = sheet
         worksheets.when_measured(self.exercise, show_measured)
 
@@ -483,16 +511,17 @@ class LabSession:
         return handle
 
     def _add_chart(self, chart: Chart):
-        series = [viser.uplot.Series(label="time [ms]")]
+        series = [viser.uplot.Series(label="time before now [ms]")]
         if chart.band:
             series += [viser.uplot.Series(label="+3σ", stroke="rgba(214,39,40,0.35)", width=1),
                        viser.uplot.Series(label="−3σ", stroke="rgba(214,39,40,0.35)", width=1)]
         series += [viser.uplot.Series(label=s.label, stroke=s.color, width=1.5) for s in chart.series]
+        series += [scope.ANCHOR_SERIES]               # holds the y range still without rebuilding the chart
         bands = (viser.uplot.Band(series=(1, 2), fill="rgba(214,39,40,0.12)"),) if chart.band else None
-        empty = tuple(np.zeros(2) for _ in series)
+        empty = (np.array([-self.window_ms, 0.0]),) + tuple(np.zeros(2) for _ in series[1:])
         return self.client.gui.add_uplot(
             empty, tuple(series), title=f"{chart.title} [{chart.unit}]", bands=bands,
-            axes=(viser.uplot.Axis(label="time [ms]"), viser.uplot.Axis(label=f"{chart.title} [{chart.unit}]")),
+            **scope.chart_options("time before now [ms]", f"[{chart.unit}]"),
             scales={"x": viser.uplot.Scale(time=False)}, aspect=SCOPE_ASPECT)
 
     # -- events --------------------------------------------------------------------
@@ -579,11 +608,21 @@ class LabSession:
                 (generation, exercise, values), self.analysis_request = self.analysis_request, None
             spent = time.thread_time()
             try:
+                last = None
                 for result in _analyses(exercise.analyse(values)):
-                    if self.analysis_request is not None or not self._show(generation, result):
+                    shown = margins.with_margins(result, self.shown_margins)   # the last margins until ...
+                    if self.analysis_request is not None or not self._show(generation, shown):
                         break
+                    last = result
                     self._pause(self.budget.charge(time.thread_time() - spent), self.analysis_wakeup)
                     spent = time.thread_time()
+                else:                                     # ... the new ones are ready (they take longer)
+                    if last is not None and self.analysis_request is None:
+                        fresh = margins.margin_view(exercise, values)
+                        with self.gui_lock:
+                            if self._current(generation):
+                                self.shown_margins = fresh
+                        self._show(generation, margins.with_margins(last, fresh))
             except (ValueError, ArithmeticError) as error:   # incl. ParameterError, LinAlgError: the tab's
                 traceback.print_exc()                         # analyses go on at the next slider move
                 with self.gui_lock:
@@ -680,7 +719,7 @@ class LabSession:
             carry += time_scale * elapsed / T
             steps, carry = int(carry), carry - int(carry)
             trace = self.simulation.advance(steps)
-            window = min(max(int(SCOPE_WINDOW_S * max(time_scale / 0.01, 1.0) / T), 2), SCOPE_ROWS)
+            window = self._window_rows()
             self.buffer = np.concatenate([self.buffer, trace])[-window:]
             message = self.simulation.status_message()
             if message:
@@ -695,9 +734,25 @@ class LabSession:
                 next_readouts = now + LIVE_READOUT_PERIOD_S
             if message and self.simulation is stopped and not self.running:   # not reset meanwhile
                 self.status.content = f"**Stopped: {message}** Press Run or Reset to start again."
-                self.client.add_notification("Simulation stopped", message, color="red",
-                                             auto_close_seconds=10.0)
+                self._notify_stop(message)
         return carry, next_scene, next_readouts
+
+    def _notify_stop(self, message: str) -> None:
+        """One 'Simulation stopped' card at a time: a new stop replaces the last card."""
+        self._clear_notification()
+        self.notification = self.client.add_notification("Simulation stopped", message, color="red",
+                                                         auto_close_seconds=10.0)
+
+    def _clear_notification(self) -> None:
+        if getattr(self, "notification", None) is not None:
+            self.notification.remove()
+            self.notification = None
+
+    def _window_rows(self) -> int:
+        """Samples in the scope window at the current time scale."""
+        time_scale = self.values.get("time_scale", 1.0)
+        T = self.simulation.sample_time_s
+        return min(max(int(SCOPE_WINDOW_S * max(time_scale / 0.01, 1.0) / T), 2), SCOPE_ROWS)
 
     def _latest(self) -> dict[str, float]:
         """The newest sample of the scope buffer by column name (empty before the first)."""
@@ -716,14 +771,15 @@ class LabSession:
             return
         self.drawn_until = buffer[-1, 0]
         sample_time = self.simulation.sample_time_s
+        self.window_ms = self._window_rows() * sample_time * 1e3
         with self.client.atomic():                    # one wake-up of the event loop per frame, not per chart
-            for chart, handle in zip(self.exercise.charts, self.charts):
-                self._draw_chart(chart, handle, buffer, sample_time)
+            for chart, handle, y_range in zip(self.exercise.charts, self.charts, self.y_ranges):
+                self._draw_chart(chart, handle, buffer, sample_time, y_range)
 
-    def _draw_chart(self, chart: Chart, handle, buffer: np.ndarray, sample_time: float) -> None:
+    def _draw_chart(self, chart: Chart, handle, buffer: np.ndarray, sample_time: float,
+                    y_range: scope.StickyRange) -> None:
         columns = [self.columns[s.column] for s in chart.series]
-        rows = buffer[_scope_rows(buffer, columns, sample_time)]
-        t_ms = rows[:, 0] * 1e3
+        rows, t_ms = scope.spanning(buffer[_scope_rows(buffer, columns, sample_time)], self.window_ms)
         ys = []
         if chart.band:
             centre, sigma = rows[:, self.columns[chart.band[0]]], rows[:, self.columns[chart.band[1]]]
@@ -731,6 +787,8 @@ class LabSession:
             ys += [(centre + 3 * sigma) * scale, (centre - 3 * sigma) * scale]
         ys += [rows[:, column] * s.scale for s, column in zip(chart.series, columns)]
         x = t_ms.astype(np.float32) if _float32_resolves(t_ms, sample_time * 1e3) else t_ms
+        y_range.update(ys)
+        ys.append(scope.anchor(y_range.range, len(t_ms)))
         data = (x, *(y.astype(np.float32) for y in ys))
         # Straight to the wire: the handle's ``data`` setter would cast every column to float64.
         handle._impl.props.data = data
@@ -796,7 +854,7 @@ def _plot_chart(plot: Plot) -> tuple[tuple, dict]:
         viser.uplot.Series(label=label, stroke=color, width=1.5, points=viser.uplot.Series_Points(show=False))
         for label, _, color in plot.series)
     return (x, *ys), {
-        "series": series, "title": plot.title,
+        "series": series, "title": plot.title, "legend": viser.uplot.Legend(live=False), "padding": scope.PADDING,
         "axes": (viser.uplot.Axis(label=plot.x_label), viser.uplot.Axis(label=plot.y_label)),
         "scales": {"x": viser.uplot.Scale(time=False, **(LOG_SCALE if plot.log_x else {})),
                    "y": viser.uplot.Scale(auto=False, **(LOG_SCALE | _log_span(*ys) if plot.log_y else _span(*ys)))}}
@@ -849,7 +907,7 @@ def _pole_map(poles: dict[str, np.ndarray], title: str) -> tuple[tuple, dict]:
         viser.uplot.Series(label="Re s = 0", stroke="#000000", width=1, dash=(6.0, 4.0),
                            points=viser.uplot.Series_Points(show=False)),)
     return (x, *columns), {
-        "series": series, "title": title,
+        "series": series, "title": title, "legend": viser.uplot.Legend(live=False), "padding": scope.PADDING,
         "axes": (viser.uplot.Axis(label="Re s [rad/s]"), viser.uplot.Axis(label="Im s [rad/s]")),
         "scales": {"x": viser.uplot.Scale(time=False),
                    "y": viser.uplot.Scale(auto=False, min=-1.05 * reach, max=1.05 * reach)}}

@@ -272,3 +272,118 @@ def largest_gain_factor(rms_at_gain, bound: float, low: float = 0.05,
 def z_to_s(poles_z: np.ndarray, sample_time_s: float) -> np.ndarray:
     """Map discrete poles to the equivalent continuous ones, s = ln(z) / T [rad/s]."""
     return np.log(np.asarray(poles_z, dtype=complex)) / sample_time_s
+
+
+# -- loop broken at the plant input: margins and sensitivity (ISO 14839-3) -------------------
+#: ISO 14839-3 zones by the peak of the sensitivity function |S|max (absolute value, not dB)
+ISO_14839_ZONES = (("A", 3.0), ("B", 4.0), ("C", 5.0), ("D", float("inf")))
+
+
+def compensator(model: control.StateSpace, controller: control.StateSpace, kalman_gain: np.ndarray,
+                use_estimate: bool, state_gain: np.ndarray | None = None) -> control.StateSpace:
+    """Everything between the measurements and the plant input of ``closed_loop`` (reference 0):
+    the steady-state filter (eq. 2), the fed-back position (measured or estimated), the
+    controller and the optional state feedback, as one discrete system y [V] (2) -> i_ref [V]."""
+    A, B, C = (np.asarray(M) for M in (model.A, model.B, model.C))
+    Ac, Bc, Cc, Dc = (np.atleast_2d(np.asarray(M)) for M in
+                      (controller.A, controller.B, controller.C, controller.D))
+    n = A.shape[0]
+    K, I, Bu = np.asarray(kalman_gain), np.eye(n), B[:, :1]
+    k_mx = np.max(np.abs(C[0]))
+    if use_estimate:                                   # fed-back position = Fp x_p + Fy y
+        h = np.zeros((1, n))
+        h[0, 0] = k_mx
+        Fp, Fy = h @ (I - K @ C), h @ K
+    else:
+        Fp, Fy = np.zeros((1, n)), np.array([[1.0, 0.0]])
+    Ks = np.zeros((1, n)) if state_gain is None else np.reshape(state_gain, (1, n))
+    # u = Cc x_c - Dc fb - Ks x_hat,  x_hat = (I - K C) x_p + K y
+    Up, Uy = -Dc @ Fp - Ks @ (I - K @ C), -Dc @ Fy - Ks @ K
+    Acomp = np.block([[Ac, -Bc @ Fp], [Bu @ Cc, A @ (I - K @ C) + Bu @ Up]])
+    Bcomp = np.vstack([-Bc @ Fy, A @ K + Bu @ Uy])
+    Ccomp = np.hstack([Cc, Up])
+    return control.ss(Acomp, Bcomp, Ccomp, Uy, model.dt)
+
+
+def loop_at_plant_input(model: control.StateSpace, compensator_system: control.StateSpace) -> control.StateSpace:
+    """Open-loop transfer L with the loop broken at the plant input: a signal injected at
+    i_ref runs through the plant (its measurement outputs) and the compensator and comes
+    back with the opposite sign, so the closed loop is 1 / (1 + L) there."""
+    plant_u = control.ss(np.asarray(model.A), np.asarray(model.B)[:, :1], np.asarray(model.C),
+                         np.asarray(model.D)[:, :1], model.dt)
+    return -control.series(plant_u, compensator_system)
+
+
+def iso_zone(peak: float) -> str:
+    """ISO 14839-3 zone of a sensitivity peak |S|max: A < 3, B < 4, C < 5, D above."""
+    return next(zone for zone, limit in ISO_14839_ZONES if peak < limit)
+
+
+@dataclass(frozen=True)
+class Margins:
+    """Stability margins of an open loop L (loop broken at the plant input) and the peak of
+    the sensitivity S = 1 / (1 + L).  An open-loop unstable plant (the magnetic bearing) is
+    stable only between two gains, so it has a gain margin upwards and one downwards."""
+
+    gain_margin: float            # gain factor that reaches instability upwards (inf: none)
+    gain_margin_down: float       # ... downwards (0: none)
+    phase_margin_deg: float       # smallest over the gain crossovers (inf: none)
+    gain_crossover_rad_s: float   # where |L| = 1 with the smallest phase margin (NaN: none)
+    sensitivity_peak: float       # |S|max
+    sensitivity_peak_rad_s: float
+    stable: bool                  # closed loop 1 / (1 + L) stable
+
+    @property
+    def zone(self) -> str:
+        return iso_zone(self.sensitivity_peak) if self.stable else "D"
+
+
+def frequency_grid(system, points: int = 800, low_rad_s: float = 1.0) -> np.ndarray:
+    """Log-spaced angular frequencies [rad/s] up to the Nyquist frequency of a discrete system
+    (or 1e5 rad/s for a continuous one)."""
+    high = np.pi / system.dt if system.dt else 1e5
+    return np.logspace(np.log10(low_rad_s), np.log10(0.999 * high), points)
+
+
+def open_loop_response(open_loop, omega) -> np.ndarray:
+    """L(jω) (or L(e^{jωT})) of a SISO system on ``omega`` [rad/s]."""
+    return np.asarray(np.squeeze(control.frequency_response(open_loop, np.atleast_1d(omega)).complex))
+
+
+def _roots(f, omega: np.ndarray, values: np.ndarray) -> list[float]:
+    """Frequencies where ``f`` changes sign between grid points, refined by Brent's method."""
+    found = []
+    for k in np.nonzero(np.sign(values[:-1]) * np.sign(values[1:]) < 0)[0]:
+        found.append(scipy.optimize.brentq(f, omega[k], omega[k + 1], xtol=1e-9 * omega[k]))
+    return found
+
+
+def loop_margins(open_loop, omega: np.ndarray | None = None) -> Margins:
+    """Margins from the frequency response on ``omega`` (log grid to Nyquist by default):
+    phase crossovers where Im L changes sign with Re L < 0 and gain crossovers where |L| = 1,
+    each refined by Brent's method; |S|max refined around its grid peak."""
+    omega = frequency_grid(open_loop) if omega is None else np.asarray(omega, dtype=float)
+    L = open_loop_response(open_loop, omega)
+
+    def at(w: float) -> complex:
+        return complex(open_loop_response(open_loop, w))
+    gains = []
+    for w in _roots(lambda w: at(w).imag, omega, L.imag):
+        value = at(w)
+        if value.real < 0:
+            gains.append(1.0 / abs(value))
+    phase_margins = [(float(np.degrees(np.angle(-at(w)))), w)
+                     for w in _roots(lambda w: abs(at(w)) - 1.0, omega, np.abs(L) - 1.0)]
+    pm, wc = min(phase_margins, key=lambda p: abs(p[0]), default=(np.inf, np.nan))
+    closed = control.feedback(open_loop, 1)
+    poles = np.asarray(closed.poles())
+    stable = bool(np.all(np.abs(poles) < 1.0)) if open_loop.dt else bool(np.all(poles.real < 0))
+    values = 1.0 / np.abs(1.0 + L)
+    k = int(np.argmax(values))
+    lo, hi = omega[max(k - 1, 0)], omega[min(k + 1, len(omega) - 1)]
+    refined = scipy.optimize.minimize_scalar(lambda w: -1.0 / abs(1.0 + at(w)), bounds=(lo, hi),
+                                             method="bounded", options={"xatol": 1e-7 * omega[k]})
+    peak, peak_w = (-refined.fun, refined.x) if -refined.fun > values[k] else (values[k], omega[k])
+    return Margins(min((g for g in gains if g > 1), default=np.inf),
+                   max((g for g in gains if g < 1), default=0.0),
+                   abs(pm) if np.isfinite(pm) else np.inf, float(wc), float(peak), float(peak_w), stable)

@@ -128,6 +128,11 @@ class Exercise:
     def metrics(self, values: dict, duration_s: float) -> dict:
         raise NotImplementedError
 
+    def open_loops(self, values: dict) -> dict:
+        """Feedback loops broken at the plant input, by name -> open loop L (``control`` LTI
+        system, S = 1 / (1 + L)); the app draws their Bode plots, margins and |S|max."""
+        return {}
+
     def live_readouts(self, trace: dict[str, np.ndarray]) -> list[tuple[str, float, str]]:
         """Readouts from the scope's buffer (column name -> samples)."""
         return []

@@ -199,6 +199,11 @@ class KalmanNoise(Exercise):
             Series("coil current i", "current_a", 1.0, "#2ca02c"),)),
     )
 
+    def open_loops(self, values: dict) -> dict:
+        axis = setup(values)
+        return {f"{source} feedback": axis.with_changes(use_estimate=source == "estimated").loop_at_plant_input()
+                for source in ("measured", "estimated")}
+
     def model(self, values: dict) -> dict:
         axis = setup(values)
         A, B, C = (np.asarray(M) for M in (axis.model.A, axis.model.B, axis.model.C))

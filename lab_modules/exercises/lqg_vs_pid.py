@@ -693,6 +693,9 @@ class LqgVsPid(Exercise):
                 "A_aug": A_aug.tolist(), "B_aug": B_aug.tolist(),
                 "state_gain_K": list(lqg.state_gain), "integral_gain_K_I_v_per_m_s": lqg.integral_gain_v_per_m_s}
 
+    def open_loops(self, values: dict) -> dict:
+        return {name: axis.loop_at_plant_input() for name, axis in setups(values).items()}
+
     def analyse(self, values: dict):
         """Yields the step tests, the two stiffness definitions and the poles
         first; then the noise-driven RMS values and the largest disturbance step

@@ -116,6 +116,14 @@ class AxisSetup:
             loop = analysis.with_reference_filter(loop, self.reference_filter)
         return loop
 
+    def loop_at_plant_input(self, gain_factor: float = 1.0) -> control.StateSpace:
+        """Open loop L broken at the plant input (i_ref): plant, filter, controller and state
+        feedback in series, sign included, so S = 1 / (1 + L) (for margins and |S|max)."""
+        state_gain = self.state_feedback_gain
+        comp = analysis.compensator(self.model, gain_factor * self.controller, self.steady_state_filter[0],
+                                    self.use_estimate, None if state_gain is None else gain_factor * state_gain)
+        return analysis.loop_at_plant_input(self.model, comp)
+
     @property
     def noise_variances(self) -> dict[str, float]:
         """Per-sample variances of the loop's noise inputs (``analysis.LOOP_INPUTS``)."""
