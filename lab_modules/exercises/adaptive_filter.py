@@ -280,7 +280,7 @@ CLAIMS = (
 
 class AdaptiveFilter(Exercise):
     name = "adaptive_filter"
-    title = "Adaptive Kalman filter: k_i, k_s scheduled on the operating point (paper 002)"
+    title = "Kalman filter scheduled on k_i and k_s"
     worksheet = "adaptive_filter.md"
     parameters = PARAMETERS
     default_duration_s = PERIOD_S

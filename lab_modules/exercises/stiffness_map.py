@@ -411,7 +411,7 @@ CLAIMS = (
 
 class StiffnessMap(Exercise):
     name = "stiffness_map"
-    title = "Stiffness map: k_i, k_s by least squares, FBFNN and ADALINE (paper 002)"
+    title = "Stiffness map: identifying k_i and k_s"
     worksheet = "stiffness_map.md"
     parameters = PARAMETERS
     default_duration_s = ADALINE_DURATION_S

@@ -191,7 +191,7 @@ def steady_std(trace: dict, column: str, duration_s: float) -> float:
 
 class ThrustLiftoff(Exercise):
     name = "thrust_liftoff"
-    title = "Thrust bearing lift-off: filter before you differentiate"
+    title = "Thrust bearing: filter, then differentiate"
     worksheet = "thrust_liftoff.md"
     parameters = PARAMETERS
     default_duration_s = 2.0
