@@ -10,6 +10,7 @@ and a browser page from another origin cannot open a tab at all.
 
 from __future__ import annotations
 
+import ctypes
 import socket
 import sys
 import threading
@@ -56,6 +57,31 @@ class Settings:
                    token_generated=generated, origins=access.OriginPolicy(args.allow_origin or ()))
 
 
+
+def _libc():
+    """glibc, where there is one (Linux); None elsewhere."""
+    try:
+        return ctypes.CDLL("libc.so.6")
+    except OSError:
+        return None
+
+
+_LIBC = _libc()
+_M_ARENA_MAX = -8
+
+
+def _limit_malloc_arenas() -> None:
+    """Every tab runs threads of its own; glibc would give each a malloc arena that it never
+    hands back, so a server whose tabs come and go would grow without leaking an object."""
+    if _LIBC is not None:
+        _LIBC.mallopt(_M_ARENA_MAX, 2)
+
+
+def _return_freed_memory() -> None:
+    """Give the memory of a closed tab back to the system (glibc keeps freed pages otherwise)."""
+    if _LIBC is not None:
+        _LIBC.malloc_trim(0)
+
 def shown_url(host: str, port: int) -> str:
     """The address students open: for a wildcard bind, this machine's address on the network."""
     if host in ("0.0.0.0", "::", ""):
@@ -79,6 +105,7 @@ def serve(settings: Settings) -> int:
         return USAGE_ERROR
     chosen = get(settings.exercise)
     chosen.simulation(chosen.resolve({})).advance(1)       # compile the loop before the first tab
+    _limit_malloc_arenas()
     server = viser.ViserServer(host=settings.host, port=settings.port, label="AMB estimation lab", verbose=False)
     if server.get_port() != settings.port:                 # taken between the check and the start
         server.stop()
@@ -123,6 +150,7 @@ def serve(settings: Settings) -> int:
         policy.forget(client.client_id)
         if session is not None:
             session.close()
+        _return_freed_memory()
 
     url = shown_url(settings.host, server.get_port())
     print(f"AMB estimation lab: open {url} in a browser (Ctrl+C to stop)", flush=True)

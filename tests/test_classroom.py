@@ -17,7 +17,15 @@ import time
 import msgspec
 import pytest
 
-from tests.wsclient import REPO, RawTab, lab_process, process_cpu_s, process_rss_mb, process_threads
+from tests.wsclient import (
+    REPO,
+    RawTab,
+    lab_process,
+    process_cpu_s,
+    process_rss_mb,
+    process_threads,
+    run_async,
+)
 
 pytestmark = pytest.mark.classroom
 
@@ -97,7 +105,7 @@ def test_flood_from_one_tab_does_not_hurt_another(tmp_path):
                 cpu.append(100 * (process_cpu_s(server.pid) - c0) / (time.perf_counter() - t0))
             await tab.close()
             return baseline, quiet_rate, trips, sent, rate, cpu
-        baseline, quiet_rate, trips, sent, rate, cpu = asyncio.run(scenario())
+        baseline, quiet_rate, trips, sent, rate, cpu = run_async(scenario())
     median, quiet_median = statistics.median(trips), statistics.median(baseline)
     print(f"\nflood: {sent} updates in 10 s ({sent / 10:.0f}/s); other tab during the flood: scope "
           f"{rate:.1f} updates/s (without flood {quiet_rate:.1f}), slider round trip median {median:.0f} ms "
@@ -134,7 +142,7 @@ def test_churn_leaks_no_threads_or_memory(tmp_path):
             while time.perf_counter() < deadline and process_threads(server.pid) > threads0:
                 await asyncio.sleep(0.5)
             return threads0, rss0, process_threads(server.pid), process_rss_mb(server.pid)
-        threads0, rss0, threads1, rss1 = asyncio.run(scenario())
+        threads0, rss0, threads1, rss1 = run_async(scenario())
     print(f"\nchurn: 200 cycles; threads {threads0} -> {threads1}; RSS {rss0:.0f} -> {rss1:.0f} MB "
           f"(+{rss1 - rss0:.1f} MB)")
     assert threads1 <= threads0
@@ -170,7 +178,7 @@ def test_switch_burst_leaves_a_running_simulation(tmp_path):
                         if e["type"] == "GuiMarkdownMessage" and (e["content"] or "").startswith("### ")]
             await tab.close()
             return burst, headings, rate
-        burst, headings, rate = asyncio.run(scenario())
+        burst, headings, rate = run_async(scenario())
     text = log.read_text()
     print(f"\nburst: 30 switches in {burst:.2f} s; then showing {headings}; scope {rate:.1f} updates/s")
     assert burst <= 2.0 and len(headings) == 1 and rate >= 5
@@ -193,7 +201,7 @@ def test_invalid_messages_are_answered_and_logged_once(tmp_path):
             alive = await _round_trip_ms(tab, slider, tab.find_containing("GuiMarkdownMessage", READOUTS), 2.0)
             await tab.close()
             return shown, alive
-        shown, alive = asyncio.run(scenario())
+        shown, alive = run_async(scenario())
     text = log.read_text()
     assert shown and alive < 5000
     assert text.count("invalid message") == 1 and "Traceback" not in text, text[-2000:]
@@ -209,7 +217,7 @@ def test_foreign_origin_is_refused_own_origin_accepted(tmp_path):
             built = await own.wait_for(lambda: own.find("GuiUplotMessage", SCOPE), 120)
             await own.close()
             return foreign.close_code, foreign.elements, built
-        code, elements, built = asyncio.run(scenario())
+        code, elements, built = run_async(scenario())
     assert code == 1008 and not any(e["type"] == "GuiUplotMessage" for e in elements.values())
     assert built
 
@@ -238,7 +246,7 @@ def test_oversized_upload_is_refused_before_any_part(tmp_path):
             shown = await tab.wait_for(lambda: tab.find_containing("GuiMarkdownMessage", "largest accepted"), 20)
             await tab.close()
             return shown, rss
-        shown, rss = asyncio.run(scenario())
+        shown, rss = run_async(scenario())
     print(f"\nupload: 320 MB declared, 2 x 8 parts of 10 MB sent: refused in the tab ({bool(shown)}); "
           f"server RSS {rss[0]:.0f} -> {rss[1]:.0f} -> {rss[2]:.0f} MB")
     assert shown and "&lt;b&gt;" not in log.read_text()
@@ -273,7 +281,7 @@ def test_saved_experiment_survives_sigkill(tmp_path):
             note = await tab.wait_for(lambda: tab.find_containing("GuiMarkdownMessage", "Saved as **"), 30)
             code = tab.elements[note]["content"].split("**")[1]
             return code, label, moved
-        code, label, moved = asyncio.run(first())
+        code, label, moved = run_async(first())
         os.kill(server.pid, signal.SIGKILL)
         server.wait(10)
     with lab_process(port, data_dir=tmp_path, log=tmp_path / "b.log"):
@@ -286,7 +294,7 @@ def test_saved_experiment_survives_sigkill(tmp_path):
             slider = tab.find("GuiSliderMessage", label)
             await tab.close()
             return opened, tab.elements[slider]["value"], tab.find_containing("GuiMarkdownMessage", "### Maglev")
-        opened, value, heading = asyncio.run(second())
+        opened, value, heading = run_async(second())
     from app.store import Store
     store = Store(tmp_path)
     saved = store.load(code)
@@ -325,6 +333,6 @@ def test_token_gate_builds_nothing_before_the_right_token(tmp_path):
             built = await tab.wait_for(lambda: tab.find("GuiUplotMessage", SCOPE), 120)
             await tab.close()
             return before, wrong, built
-        before, wrong, built = asyncio.run(scenario())
+        before, wrong, built = run_async(scenario())
     assert "GuiUplotMessage" not in before and "GuiSliderMessage" not in before
     assert wrong and built

@@ -25,6 +25,7 @@ from app.hall import HAPROXY_MISSING, haproxy_config
 from app.load_bench import Tab, process_tree, scope_titles, wait_http
 from tests.conftest import Tab as BrowserTab
 from tests.conftest import browser_only
+from tests.wsclient import run_async
 
 ROOT = Path(__file__).resolve().parent.parent
 HAPROXY = shutil.which("haproxy")
@@ -111,7 +112,7 @@ def test_two_workers_eight_tabs_crash_and_ctrl_c(tmp_path):
     port = 8150
     titles = scope_titles("kalman_noise")
     with hall(port, tmp_path) as supervisor:
-        asyncio.run(_scenario(supervisor, port, titles))
+        run_async(_scenario(supervisor, port, titles))
         tree = process_tree(supervisor.pid)
         assert len(tree) >= 4, "supervisor, two workers and HAProxy"
         supervisor.send_signal(signal.SIGINT)                 # Ctrl-C

@@ -12,6 +12,7 @@ from __future__ import annotations
 import asyncio
 import subprocess
 import sys
+import threading
 import time
 import urllib.request
 from contextlib import contextmanager
@@ -210,3 +211,22 @@ if __name__ == "__main__":
     # python -m tests.wsclient flood URL SECONDS: prints "flooding" when it starts, then the number sent
     if sys.argv[1] == "flood":
         print(asyncio.run(flood(sys.argv[2], float(sys.argv[3]))), flush=True)
+
+
+def run_async(coroutine):
+    """``asyncio.run(coroutine)`` on a thread of its own: the browser tests' synchronous
+    Playwright keeps an event loop running on the main thread, where asyncio.run refuses to start."""
+    outcome = {}
+
+    def target():
+        try:
+            outcome["value"] = asyncio.run(coroutine)
+        except BaseException as error:  # noqa: BLE001 - re-raised in the caller
+            outcome["error"] = error
+
+    thread = threading.Thread(target=target)
+    thread.start()
+    thread.join()
+    if "error" in outcome:
+        raise outcome["error"]
+    return outcome["value"]
