@@ -15,6 +15,7 @@ import socket
 import sys
 import threading
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -92,6 +93,11 @@ def shown_url(host: str, port: int) -> str:
         except OSError:
             host = socket.gethostname()
     return f"http://{'[' + host + ']' if ':' in host else host}:{port}"
+
+
+#: viser marks a connection closed before it calls the disconnect callback that stops the tab's
+#: threads, so a frame drawn in between is dropped with this warning: expected, not a fault.
+warnings.filterwarnings("ignore", message=r"Queued a \w+ on a closed connection", category=UserWarning)
 
 
 def serve(settings: Settings) -> int:

@@ -778,6 +778,8 @@ class LabSession:
 
     def _draw_chart(self, chart: Chart, handle, buffer: np.ndarray, sample_time: float,
                     y_range: scope.StickyRange) -> None:
+        if self.closed:
+            return
         columns = [self.columns[s.column] for s in chart.series]
         rows, t_ms = scope.spanning(buffer[_scope_rows(buffer, columns, sample_time)], self.window_ms)
         ys = []
