@@ -26,13 +26,13 @@ import statistics
 import subprocess
 import sys
 import time
-import urllib.request
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from app.load_bench import wait_http
 from app.session import SCENE_REFRESH
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -92,15 +92,7 @@ def lab_server(log_path: Path, timeout_s: float = 120.0) -> Iterator[LabServer]:
                                   stdout=log, stderr=subprocess.STDOUT, text=True)
         url = f"http://127.0.0.1:{port}"
         try:
-            deadline = time.time() + timeout_s
-            while True:
-                try:                                  # a real request: a bare connect makes the server log an error
-                    urllib.request.urlopen(url, timeout=5).close()
-                    break
-                except OSError:
-                    if server.poll() is not None or time.time() > deadline:
-                        raise RuntimeError(f"the lab server did not start: {log_path.read_text()}") from None
-                    time.sleep(0.3)
+            wait_http(url, server, timeout_s, log_path)
             yield LabServer(url, server.pid)
         finally:
             server.terminate()
