@@ -63,11 +63,16 @@ class StickyRange:
 
     def update(self, columns: list[np.ndarray], now: float | None = None) -> bool:
         """Follow the traces; True if the range changed."""
-        now = time.perf_counter() if now is None else now
         finite = np.concatenate([c[np.isfinite(c)] for c in columns]) if columns else np.zeros(0)
         if finite.size == 0:
             return False
-        low, high = float(finite.min()), float(finite.max())
+        return self.follow(float(finite.min()), float(finite.max()), now)
+
+    def follow(self, low: float, high: float, now: float | None = None) -> bool:
+        """``update`` from the lowest and highest finite value drawn (nothing finite: low > high)."""
+        if not low <= high:
+            return False
+        now = time.perf_counter() if now is None else now
         if self.range is None or low < self.range[0] or high > self.range[1]:
             self.range, self.loose_since = nice_range(low, high), None
             return True

@@ -83,6 +83,17 @@ def _return_freed_memory() -> None:
     if _LIBC is not None:
         _LIBC.malloc_trim(0)
 
+def _settle_optional_imports() -> None:
+    """python-control tries ``from slycot import ...`` on every frequency response and falls back
+    to its own code when that fails; a failed import searches the whole import path again each
+    time (under the import lock), a third of a tab's analysis.  Without slycot, record once that
+    it is missing, so the import fails at once."""
+    try:
+        import slycot  # noqa: F401
+    except ImportError:
+        sys.modules["slycot"] = None
+
+
 def shown_url(host: str, port: int) -> str:
     """The address students open: for a wildcard bind, this machine's address on the network."""
     if host in ("0.0.0.0", "::", ""):
@@ -109,6 +120,7 @@ def serve(settings: Settings) -> int:
     except (ParameterError, StoreError) as error:
         print(f"error: {error}", file=sys.stderr)
         return USAGE_ERROR
+    _settle_optional_imports()
     chosen = get(settings.exercise)
     chosen.simulation(chosen.resolve({})).advance(1)       # compile the loop before the first tab
     _limit_malloc_arenas()

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import viser
 
-from app import layout, margins, scope, worksheets
+from app import frames, layout, margins, scope, worksheets
 from app.access import token_matches
 from app.store import Store, StoreError
 from app.traffic import callback
@@ -36,7 +36,6 @@ from lab_modules.parameters import Parameter, ParameterError
 from lab_modules.scenes.bearing import CANVAS_PX
 
 STATIC = Path(__file__).resolve().parent.parent / "static"
-FRAME_S = 1 / 25                  # display refresh
 #: 3D view refresh periods [s] (None: still).  Every scene change makes the viser client
 #: render for 250 ms, so anything faster than 4/s renders non-stop: fine on a GPU, but in
 #: software WebGL it starves the page (slider-to-readout latency 0.6 s instead of 0.15 s).
@@ -281,9 +280,8 @@ class LabSession:
         self._changed()
 
     def _start_simulation_thread(self) -> None:
-        self.thread = threading.Thread(target=self._run, args=(self.generation,),
-                                       name=f"lab-{self.client.client_id}", daemon=True)
-        self.thread.start()
+        """Put this generation's simulation on the process's frame clock (``frames.CLOCK``)."""
+        self.thread = frames.CLOCK.add(self._ticker(self.generation), name=f"lab-{self.client.client_id}")
 
     def _switch(self, exercise: Exercise, overrides: dict | None = None,
                 recording: tuple[str, bytes] | None = None) -> None:
@@ -678,45 +676,52 @@ class LabSession:
             if not self.closed and hasattr(self, "error"):
                 self.error.content = f"⚠️ {escaped(text)} (the simulation goes on)"
 
-    def _run(self, generation: int) -> None:
-        """The simulation thread: an error in one frame is reported and the next frame goes on."""
-        carry, last, next_scene, next_readouts = 0.0, time.perf_counter(), 0.0, 0.0
+    def _ticker(self, generation: int) -> Callable[[float], bool]:
+        """The simulation's frame step on the shared frame clock: advances, draws and animates
+        until the tab closes or shows another exercise; an error in one frame is reported and
+        the next frame goes on."""
+        state = [0.0, time.perf_counter(), 0.0, 0.0]      # carry, last frame, next scene, next readouts
         T = self.simulation.sample_time_s
-        next_frame = last
-        while self._current(generation):
-            next_frame += FRAME_S                     # a steady frame rate: the frame's own work is not added
-            delay = next_frame - time.perf_counter()
-            if delay > 0:
-                time.sleep(delay)
-            else:
-                next_frame = time.perf_counter()      # behind (a busy server): no burst of frames to catch up
-            if not self._current(generation):         # the tab closed or switched during the sleep
-                return
-            now = time.perf_counter()
-            elapsed, last = now - last, now
+
+        def step(now: float) -> bool:
+            if not self._current(generation):
+                return False
+            carry, last, next_scene, next_readouts = state
             try:
-                carry, next_scene, next_readouts = self._frame(generation, now, elapsed, T, carry,
-                                                               next_scene, next_readouts)
+                state[0], state[2], state[3] = self._frame(generation, now, now - last, T, carry,
+                                                           next_scene, next_readouts)
             except Exception as error:  # noqa: BLE001 - reported; the next frame goes on
                 self._problem("simulation", error)
+            state[1] = now
+            return True
+        return step
 
     def _frame(self, generation: int, now: float, elapsed: float, T: float, carry: float,
                next_scene: float, next_readouts: float) -> tuple[float, float, float]:
-        """One display frame: advance, draw, 3D view; returns the carried state."""
+        """One display frame: advance, draw, 3D view; returns the carried state.
+
+        Runs on a frame thread shared with other tabs, so it never waits for this tab's
+        locks: while the worker holds them (an exercise being built, a retune), the frame
+        is skipped and the next one catches up (the simulated time is carried)."""
         period = SCENE_REFRESH[self.scene_refresh]
-        if self.scene is not None and period is not None and now >= max(next_scene, self.scene_quiet_until):
-            next_scene = now + period
-            with self.gui_lock:                   # the scene belongs to this generation only
+        if self.scene is not None and period is not None and now >= max(next_scene, self.scene_quiet_until) \
+                and self.gui_lock.acquire(blocking=False):
+            try:                                  # the scene belongs to this generation only
+                next_scene = now + period
                 if self._current(generation):
                     try:
                         self.scene.animate(now, self._latest())
                     except Exception as error:  # noqa: BLE001 - the 3D view is not worth the simulation
                         self._problem("3D view", error)
-        with self.lock:
+            finally:
+                self.gui_lock.release()
+        if self.running:
+            carry += self.values.get("time_scale", 1.0) * elapsed / T
+        if not self.lock.acquire(blocking=False):
+            return carry, next_scene, next_readouts
+        try:
             if not self.running:
-                return carry, next_scene, next_readouts
-            time_scale = self.values.get("time_scale", 1.0)
-            carry += time_scale * elapsed / T
+                return 0.0, next_scene, next_readouts
             steps, carry = int(carry), carry - int(carry)
             trace = self.simulation.advance(steps)
             window = self._window_rows()
@@ -724,17 +729,27 @@ class LabSession:
             message = self.simulation.status_message()
             if message:
                 self.running = False
-                stopped = self.simulation
-        with self.gui_lock:
+                self.stop_shown = (message, self.simulation)
+        finally:
+            self.lock.release()
+        if not self.gui_lock.acquire(blocking=False):
+            return carry, next_scene, next_readouts
+        try:
             if not self._current(generation):
                 return carry, next_scene, next_readouts
             self._draw()
             if now >= next_readouts:
                 self._refresh_live_readouts()
                 next_readouts = now + LIVE_READOUT_PERIOD_S
-            if message and self.simulation is stopped and not self.running:   # not reset meanwhile
-                self.status.content = f"**Stopped: {message}** Press Run or Reset to start again."
-                self._notify_stop(message)
+            stop = getattr(self, "stop_shown", None)
+            if stop is not None:
+                self.stop_shown = None
+                message, stopped = stop
+                if self.simulation is stopped and not self.running:   # not reset meanwhile
+                    self.status.content = f"**Stopped: {message}** Press Run or Reset to start again."
+                    self._notify_stop(message)
+        finally:
+            self.gui_lock.release()
         return carry, next_scene, next_readouts
 
     def _notify_stop(self, message: str) -> None:
@@ -765,36 +780,39 @@ class LabSession:
     def _draw(self) -> None:
         """Send the scope charts: only when new samples arrived, as float32, and only the
         rows ``_scope_rows`` picks (the chart's pixel width, not the buffer's length)."""
-        with self.lock:
-            buffer = self.buffer
+        buffer = self.buffer                          # one reference (replaced, never changed in place)
         if len(buffer) < 2 or buffer[-1, 0] == getattr(self, "drawn_until", None):
             return
         self.drawn_until = buffer[-1, 0]
         sample_time = self.simulation.sample_time_s
         self.window_ms = self._window_rows() * sample_time * 1e3
+        if getattr(self, "chart_plans_for", None) is not self.exercise:
+            self.chart_plans_for, self.chart_plans = self.exercise, [_chart_plan(c, self.columns)
+                                                                     for c in self.exercise.charts]
+        # the time axis runs from -window to 0 ms: float32 while that resolves a sample
+        float32_time = _float32_resolves(np.array((self.window_ms,)), sample_time * 1e3)
+        now = time.perf_counter()
         with self.client.atomic():                    # one wake-up of the event loop per frame, not per chart
-            for chart, handle, y_range in zip(self.exercise.charts, self.charts, self.y_ranges):
-                self._draw_chart(chart, handle, buffer, sample_time, y_range)
+            for plan, handle, y_range in zip(self.chart_plans, self.charts, self.y_ranges):
+                if self.closed:
+                    return
+                t_ms, t32, ys, low, high = frames.chart_frame(buffer, *plan, sample_time, self.window_ms,
+                                                              SCOPE_BUCKETS, ROUGHNESS_ROWS)
+                y_range.follow(low, high, now)
+                ys[-1, 0::2], ys[-1, 1::2] = y_range.range or (0.0, 0.0)   # the anchor series (scope.anchor)
+                data = (t32 if float32_time else t_ms, *ys)
+                # Straight to the wire: the handle's ``data`` setter would cast every column to float64.
+                handle._impl.props.data = data
+                handle._queue_update("data", data)
 
-    def _draw_chart(self, chart: Chart, handle, buffer: np.ndarray, sample_time: float,
-                    y_range: scope.StickyRange) -> None:
-        if self.closed:
-            return
-        columns = [self.columns[s.column] for s in chart.series]
-        rows, t_ms = scope.spanning(buffer[_scope_rows(buffer, columns, sample_time)], self.window_ms)
-        ys = []
-        if chart.band:
-            centre, sigma = rows[:, self.columns[chart.band[0]]], rows[:, self.columns[chart.band[1]]]
-            scale = chart.series[0].scale
-            ys += [(centre + 3 * sigma) * scale, (centre - 3 * sigma) * scale]
-        ys += [rows[:, column] * s.scale for s, column in zip(chart.series, columns)]
-        x = t_ms.astype(np.float32) if _float32_resolves(t_ms, sample_time * 1e3) else t_ms
-        y_range.update(ys)
-        ys.append(scope.anchor(y_range.range, len(t_ms)))
-        data = (x, *(y.astype(np.float32) for y in ys))
-        # Straight to the wire: the handle's ``data`` setter would cast every column to float64.
-        handle._impl.props.data = data
-        handle._queue_update("data", data)
+
+def _chart_plan(chart: Chart, columns: dict[str, int]) -> tuple:
+    """``frames.chart_frame``'s arguments describing ``chart``: its series' buffer columns (for
+    the roughness and the values), their scales, the band's (centre, σ) columns or (-1, -1)."""
+    series = np.array([columns[s.column] for s in chart.series], dtype=np.int64)
+    band = np.array([columns[c] for c in chart.band] if chart.band else (-1, -1), dtype=np.int64)
+    return (series, series, np.array([s.scale for s in chart.series], dtype=float), band,
+            float(chart.series[0].scale))
 
 
 def _scope_rows(buffer: np.ndarray, columns: list[int], sample_time_s: float,
@@ -806,7 +824,9 @@ def _scope_rows(buffer: np.ndarray, columns: list[int], sample_time_s: float,
     Drawn as lines, these points trace the same envelope as every sample (a noisy trace
     stays a band of the same height, a peak keeps its height), with at most ``2 buckets + 2``
     points.  The buckets are aligned to absolute sample numbers, so a sample once chosen
-    stays chosen while the trace scrolls (no shimmer)."""
+    stays chosen while the trace scrolls (no shimmer).
+
+    The scope draws with the compiled ``frames.scope_rows``; this is its reference."""
     n = len(buffer)
     size = -(-n // buckets)
     if size <= 2:
