@@ -230,11 +230,16 @@ class LabSession:
         """One field asking for the class token; nothing of the lab is built before it is right."""
         gui = self.client.gui
         gui.add_markdown("### AMB estimation lab\nEnter the class token your instructor gave you.")
-        field = gui.add_text("Class token", "", hint="The token shown by the lab's server at start.")
+        field = gui.add_text("Class token", "", hint="The token shown by the lab's server at start; "
+                                                     "then press Enter the lab.")
         enter = gui.add_button("Enter the lab")
         message = gui.add_markdown("")
 
         def check() -> None:
+            """The button, not every keystroke, is a try (the field sends each keystroke: a slow
+            typist would use up the tries, and free checks per keystroke would invite guessing)."""
+            if self.exercise is not None:                 # already in (a second click)
+                return
             if token_matches(self.token, field.value):
                 with self.gui_lock:
                     self.client.gui.reset()
@@ -246,7 +251,6 @@ class LabSession:
                 raise _Closed
             time.sleep(TOKEN_RETRY_S)                     # guessing costs time; other tabs are not held up
             message.content = f"⚠️ That is not the class token ({TOKEN_ATTEMPTS - self.token_attempts} tries left)."
-        field.on_update(self._on("token", check))
         enter.on_click(self._on("token", check))
 
     # -- life cycle ------------------------------------------------------------------

@@ -325,11 +325,18 @@ def test_token_gate_builds_nothing_before_the_right_token(tmp_path):
         async def scenario():
             tab = await RawTab().connect(url(port))
             field = await tab.wait_for(lambda: tab.find("GuiTextMessage", "Class token"), 60)
+            button = tab.find("GuiButtonMessage", "Enter the lab")
             await asyncio.sleep(2)
             before = {e["type"] for e in tab.elements.values()}
             await tab.set_value(field, "wrong")
+            await tab.set_value(button, True)
             wrong = await tab.wait_for(lambda: tab.find_containing("GuiMarkdownMessage", "not the class token"), 30)
+            for typed in ("k", "ka", "kal", "kalm", "kalma", "kalman"):   # keystrokes are not tries
+                await tab.set_value(field, typed)
+                await asyncio.sleep(0.1)
             await tab.set_value(field, " KALMAN42 ")
+            await asyncio.sleep(0.5)
+            await tab.set_value(button, True)
             built = await tab.wait_for(lambda: tab.find("GuiUplotMessage", SCOPE), 120)
             await tab.close()
             return before, wrong, built
