@@ -100,6 +100,7 @@ class Tab:
     connected: bool = False
     closed: str | None = None                 # why the connection ended
     scope_uuid: str | None = None
+    answers: list = field(default_factory=list)               # replies due to the lab's requests
 
     def _kind(self, message: dict) -> str:
         kind = message["type"]
@@ -127,6 +128,9 @@ class Tab:
         sizes = [len(msgspec.msgpack.encode(m)) for m in messages] if self.breakdown else None
         total = sum(sizes) if sizes else 0
         for index, message in enumerate(messages):
+            if message["type"] == "LocalStorageGetItemRequestMessage":   # a browser with nothing stored
+                self.answers.append({"type": "LocalStorageGetItemResponseMessage", "value": None,
+                                     "error": None, "request_uuid": message["request_uuid"]})
             kind = self._kind(message)
             if (message["type"] == "GuiUpdateMessage" and message["uuid"] == self.scope_uuid
                     and "data" in message["updates"]):
@@ -173,6 +177,8 @@ class Tab:
                         except TimeoutError:
                             continue
                         self.receive(frame, time.perf_counter())
+                        while self.answers:
+                            await connection.send(msgspec.msgpack.encode(self.answers.pop(0)))
                 finally:
                     inputs.cancel()
                     with contextlib.suppress(asyncio.CancelledError, websockets.ConnectionClosed):

@@ -63,6 +63,8 @@ PANEL_TABS = (("Scope", viser.Icon.WAVE_SINE), ("Pole map", viser.Icon.CHART_DOT
               ("Analysis", viser.Icon.CHART_LINE), ("Worksheet", viser.Icon.NOTEBOOK))
 LIGHT_DAMPING = 0.3               # poles below this damping always belong to the dominant view
 AUTOSAVE_AFTER_S = 1.0            # a tab's autosave is written this long after its last change
+BROWSER_KEY = "autosave"          # the browser's localStorage keeps its newest autosave code under this key
+BROWSER_WAIT_S = 1.0              # a new tab waits at most this long for the browser's answer
 TOKEN_ATTEMPTS = 5                # wrong class tokens before a tab is disconnected
 TOKEN_RETRY_S = 1.0               # a wrong token waits this long before the next try
 
@@ -180,7 +182,7 @@ class LabSession:
                 self.client.scene.configure_default_lights(cast_shadow=False)
                 self.client.scene.configure_environment_map(hdri=None)
                 if self.token is None:
-                    self._start(exercise)
+                    self._start_restored(exercise)
                 else:
                     self._ask_token(exercise)
             while True:
@@ -243,7 +245,7 @@ class LabSession:
             if token_matches(self.token, field.value):
                 with self.gui_lock:
                     self.client.gui.reset()
-                    self._start(exercise)
+                    self._start_restored(exercise)
                 return
             self.token_attempts += 1
             if self.token_attempts >= TOKEN_ATTEMPTS:
@@ -254,6 +256,39 @@ class LabSession:
         enter.on_click(self._on("token", check))
 
     # -- life cycle ------------------------------------------------------------------
+    def _start_restored(self, exercise: Exercise) -> None:
+        """Start the experiment this browser autosaved last (a reloaded tab gets its work back),
+        else ``exercise`` on its defaults (call holding ``gui_lock``)."""
+        saved = self._browser_autosave()
+        if saved is not None:
+            recording = (saved.recording_name, saved.recording) if saved.recording is not None else None
+            try:
+                self._start(self.exercises[saved.exercise], saved.parameters, recording)
+            except (ParameterError, ValueError) as error:    # saved by an older lab: its defaults instead
+                print(f"autosave {saved.code} not restored: {error}", file=sys.stderr, flush=True)
+            else:
+                self.restored_from = saved.code
+                self._show_codes()
+                return
+        self._start(exercise)
+
+    def _browser_autosave(self):
+        """The saved experiment whose code the browser keeps (``BROWSER_KEY``), or None."""
+        if self.store is None:
+            return None
+        try:
+            code = self.client.local_storage.get_item(BROWSER_KEY, timeout=BROWSER_WAIT_S)
+        except (RuntimeError, TimeoutError):              # no answer: a headless client, or storage blocked
+            return None
+        self._check_open()
+        if not code:
+            return None
+        try:
+            saved = self.store.load(code)
+        except StoreError:
+            return None
+        return saved if saved.exercise in self.exercises else None
+
     def _start(self, exercise: Exercise, overrides: dict | None = None,
                recording: tuple[str, bytes] | None = None) -> None:
         """Show ``exercise`` (call holding ``gui_lock``): at ``overrides`` and with ``recording``
@@ -354,6 +389,7 @@ class LabSession:
         try:
             if self.autosave_code is None:
                 self.autosave_code = self.store.new_autosave(*self._snapshot())
+                self.client.local_storage.set_item(BROWSER_KEY, self.autosave_code)   # for a reload
                 self._show_codes()
             else:
                 self.store.autosave(self.autosave_code, *self._snapshot())
@@ -378,9 +414,14 @@ class LabSession:
 
     def _show_codes(self) -> None:
         with self.gui_lock:
-            if self.autosave_code is not None and hasattr(self, "autosave_note") and not self.closed:
-                self.autosave_note.content = (f"This tab is autosaved as **{self.autosave_code}**: "
-                                              "after a reload, open that code.")
+            if hasattr(self, "autosave_note") and not self.closed:
+                restored = getattr(self, "restored_from", None)
+                lines = [(f"Restored **{restored}**, this browser's last autosave (a new tab or a "
+                          "reload continues the newest one).")] if restored else []
+                if self.autosave_code is not None:
+                    lines.append(f"This tab is autosaved as **{self.autosave_code}**: a reload in this "
+                                 "browser brings it back; elsewhere, open that code.")
+                self.autosave_note.content = "\n\n".join(lines)
 
     # -- GUI ---------------------------------------------------------------------
     def _build_gui(self) -> None:

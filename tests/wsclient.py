@@ -29,6 +29,12 @@ CAMERA = {"type": "ViewerCameraMessage", "wxyz": [1.0, 0.0, 0.0, 0.0], "position
           "up_direction": [0.0, 0.0, 1.0]}
 
 
+def local_storage_answer(request: dict, value: str | None = None) -> dict:
+    """What a browser answers to the lab's request for a localStorage value."""
+    return {"type": "LocalStorageGetItemResponseMessage", "value": value, "error": None,
+            "request_uuid": request["request_uuid"]}
+
+
 class RawTab:
     """One tab over a raw websocket."""
 
@@ -69,6 +75,8 @@ class RawTab:
     def _take(self, now: float, message: dict) -> None:
         kind = message.get("type", "")
         uuid = message.get("uuid")
+        if kind == "LocalStorageGetItemRequestMessage":   # answered like a browser with nothing stored
+            asyncio.get_running_loop().create_task(self.send(local_storage_answer(message)))
         if kind == "GuiUpdateMessage":
             self.updates.append((now, uuid, message["updates"]))
             element = self.elements.get(uuid)
