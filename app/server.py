@@ -29,6 +29,7 @@ from lab_modules.parameters import ParameterError
 from lab_modules.scenes.bearing import CAMERA_POSITION
 
 USAGE_ERROR = 2
+SWITCH_INTERVAL_S = 0.001
 
 
 @dataclass
@@ -121,6 +122,10 @@ def serve(settings: Settings) -> int:
         print(f"error: {error}", file=sys.stderr)
         return USAGE_ERROR
     _settle_optional_imports()
+    # A thread that gives up the GIL (a numpy or LAPACK call, a socket write) waits up to one
+    # switch interval to get it back from a busy thread: with the default 5 ms, one tab's
+    # analysis, made of many short library calls, slows to a crawl beside another's busy threads.
+    sys.setswitchinterval(SWITCH_INTERVAL_S)
     chosen = get(settings.exercise)
     chosen.simulation(chosen.resolve({})).advance(1)       # compile the loop before the first tab
     _limit_malloc_arenas()
