@@ -28,6 +28,7 @@ from lab_modules.controllers.feedback_linearisation import feedback_gain, linear
 from lab_modules.controllers.lead_lag import LEAD_LAG, LeadLag
 from lab_modules.controllers.pid import controller_step
 from lab_modules.estimators.continuous_discrete_ekf import bucy_step, propagate, update
+from lab_modules.estimators.kalman import correction
 from lab_modules.plants.maglev_ball import TABLE_3_1, MaglevPlant, rk4_step
 
 OK, STRUCK_MAGNET, FELL, DIVERGED = 0, 1, 2, 3
@@ -248,6 +249,7 @@ class MaglevSimulation:
         self.u0 = setup.plant.equilibrium_voltage_v(setup.reference.base_m)
         self.steps = 0
         self.status = OK
+        self._last_correction = None                   # (prior x̂, prior P, y, time) of the last sample
 
     def advance(self, n_steps: int) -> np.ndarray:
         if self.status != OK or n_steps <= 0:
@@ -256,13 +258,42 @@ class MaglevSimulation:
         refs = self.references.next(n_steps)
         noise = self.rng.standard_normal((n_steps, 3))
         trace = np.empty((n_steps, 1 + len(TRACE_COLUMNS)))
-        done, self.status = run(
-            n_steps, self.steps * self.sample_time_s, self.x, self.x_hat, self.P, self.xc, refs, noise,
-            self.true_constants, self.constants, self.k, np.asarray(s.filter_Q, dtype=float), np.diag(s.plant_Q).astype(float),
-            s.sensor_noise_m**2, self.sample_time_s, CONTROLLERS.index(s.controller),
-            FILTERS.index(s.filter), s.filter_substeps, *self.lead_lag, self.u0, trace)
+        Q, plant_q = np.asarray(s.filter_Q, dtype=float), np.diag(s.plant_Q).astype(float)
+
+        def part(first: int, last: int) -> tuple[int, int]:
+            return run(
+                last - first, (self.steps + first) * self.sample_time_s, self.x, self.x_hat, self.P, self.xc,
+                refs[first:last], noise[first:last], self.true_constants, self.constants, self.k, Q, plant_q,
+                s.sensor_noise_m**2, self.sample_time_s, CONTROLLERS.index(s.controller),
+                FILTERS.index(s.filter), s.filter_substeps, *self.lead_lag, self.u0, trace[first:last])
+
+        # The last sample on its own, with the filter's prior kept for ``filter_state``.
+        done, self.status = part(0, n_steps - 1) if n_steps > 1 else (0, OK)
+        if self.status == OK:
+            prior = self.x_hat.copy(), self.P.copy()
+            last, self.status = part(n_steps - 1, n_steps)
+            done += last
+            row = trace[n_steps - 1]
+            self._last_correction = (*prior, np.array([row[1 + COLUMN["x_measured_m"]]]), row[0])
         self.steps += done
         return trace[:done]
+
+    def filter_state(self) -> dict | None:
+        """The continuous-discrete EKF (eq. 2.40-2.42, H = [1 0 0]) at the last sample: corrected
+        x̂ and P, gain K, innovation and √S.  The continuous-time filters correct continuously
+        (no sample gain): their x̂ and P only."""
+        if self._last_correction is None:
+            return None
+        x_prior, P_prior, y, time_s = self._last_correction
+        state = {"title": f"{self.setup.filter} EKF of the maglev ball (paper 004 §2.5)", "time_s": float(time_s),
+                 "states": (("air gap x₁", "m"), ("ball velocity x₂", "m/s"), ("coil current x₃", "A")),
+                 "measurements": (("position sensor", "m"),)}
+        if self.setup.filter != FILTERS[0]:
+            return {**state, "x": self.x_hat.copy(), "P": self.P.copy(), "K": None, "innovation": None,
+                    "innovation_sigma": None}
+        step = correction(x_prior, P_prior, [[1.0, 0.0, 0.0]], [self.setup.sensor_noise_m**2], y)
+        return {**state, "x": step["x"], "P": step["P"], "K": step["K"], "innovation": step["innovation"],
+                "innovation_sigma": np.sqrt(np.diag(step["S"]))}
 
     def status_message(self) -> str:
         if self.status == OK:

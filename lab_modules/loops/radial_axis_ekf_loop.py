@@ -30,6 +30,7 @@ from scipy.signal import max_len_seq
 from lab_modules.controllers.pid import controller_step
 from lab_modules.estimators import extended_kalman as ef
 from lab_modules.estimators.extended_kalman import N_STATES
+from lab_modules.estimators.kalman import correction
 from lab_modules.loops.radial_axis_loop import _rk4_step
 from lab_modules.plants.radial_bearing import RIG, BearingAxis
 
@@ -256,6 +257,7 @@ class EKFLoopSimulation:
                              if setup.feedforward else 0.0)
         self.step = 0
         self.status = OK
+        self._last_correction = None                   # (prior x̂, prior P, y, time) of the last sample
 
     def retuned(self, setup: EKFLoopSetup) -> EKFLoopSimulation:
         """A simulation with new settings that carries on from this one's state
@@ -287,14 +289,45 @@ class EKFLoopSimulation:
         disturbance = np.ascontiguousarray(setup.disturbance(t - setup.input_start_s), dtype=float)
         noise = self.rng.standard_normal((n_steps, 4))
         trace = np.empty((n_steps, len(TRACE_COLUMNS)))
-        status, done = run(n_steps, setup.model, self.plant, self._plant_physics, self.x_hat, self.P,
-                           self._Q, self._R_diag, self._C, self._filter_physics,
-                           self.ctrl, *self._ctrl_matrices, self._u_limit, setup.use_estimate,
-                           self._feedforward, reference, disturbance, noise, setup.noise_sigma,
-                           setup.rig.touchdown_m, trace)
+
+        def part(first: int, last: int) -> tuple[int, int]:
+            return run(last - first, setup.model, self.plant, self._plant_physics, self.x_hat, self.P,
+                       self._Q, self._R_diag, self._C, self._filter_physics,
+                       self.ctrl, *self._ctrl_matrices, self._u_limit, setup.use_estimate,
+                       self._feedforward, reference[first:last], disturbance[first:last], noise[first:last],
+                       setup.noise_sigma, setup.rig.touchdown_m, trace[first:last])
+
+        # The last sample on its own, with the filter's prior kept for ``filter_state``.
+        status, done = part(0, n_steps - 1) if n_steps > 1 else (OK, 0)
+        if status == OK:
+            prior = self.x_hat.copy(), self.P.copy()
+            plant = self.plant.copy()
+            status, last = part(n_steps - 1, n_steps)
+            done += last
+            K_mx, K_mi = self._plant_physics[9], self._plant_physics[10]
+            y = np.array([K_mx * plant[3] + setup.noise_sigma[2] * noise[-1, 2],
+                          K_mi * plant[2] + setup.noise_sigma[3] * noise[-1, 3]])
+            self._last_correction = (*prior, y, t[-1])
         self.step += done
         self.status = status
         return np.column_stack([t[:done], trace[:done]])
+
+    def filter_state(self) -> dict | None:
+        """The EKF at the last sample: corrected x̂ and P, gain K, innovation and √S
+        (eq. 6; the measurement is linear, G = Gamma of eq. 9/14)."""
+        if self._last_correction is None:
+            return None
+        x_prior, P_prior, y, time_s = self._last_correction
+        step = correction(x_prior, P_prior, self._C, self._R_diag, y)
+        nonlinear = self.setup.model == ef.NONLINEAR
+        states = (("position x", "m"), ("velocity v", "m/s"), ("coil current i", "A")) + (
+            (("sensed position x_d (lag)", "m"), ("disturbance force f_z", "N")) if nonlinear else
+            (("current factor k_i", "N/A"), ("force-displacement factor k_x", "N/m")))
+        return {"title": ("Extended Kalman filter, disturbance model (paper 000 §III-B)" if nonlinear else
+                          "Extended Kalman filter, parameter model (paper 000 §III-A)"),
+                "time_s": float(time_s), "states": states, "x": step["x"], "P": step["P"],
+                "measurements": (("position sensor", "V"), ("current sensor", "V")),
+                "K": step["K"], "innovation": step["innovation"], "innovation_sigma": np.sqrt(np.diag(step["S"]))}
 
     def status_message(self) -> str:
         """'' while running; what stopped the simulation otherwise."""

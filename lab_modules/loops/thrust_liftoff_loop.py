@@ -33,7 +33,7 @@ import numpy as np
 import scipy.linalg
 import scipy.signal
 
-from lab_modules.estimators.kalman import STATE_SIZE, predict, update
+from lab_modules.estimators.kalman import STATE_SIZE, correction, predict, update
 from lab_modules.estimators.thrust_kalman import H, ThrustFilterDesign
 from lab_modules.plants.thrust_bearing import GRAVITY_M_PER_S2, TABLE_1, ThrustBearing, discrete_current_loop
 
@@ -292,12 +292,23 @@ class ThrustSimulation:
             noise[:, 0] = self._colour(noise[:, 0], np.exp(-b.sample_time_s / s.sensor_noise_correlation_s))
         trace = np.empty((n_steps, 1 + len(self.columns)))
         G_A, G_B, G_C, G_D = self._current
-        status, done = run(n_steps, self.step, b.sample_time_s, self.plant, self._constants,
-                           self._plant[0], self._plant[1], s.nonlinear, s.gravity_n,
-                           self.coil, G_A, G_B, G_C, G_D, s.current_loop,
-                           kf._x, kf.P, kf.A, kf.B, kf.C, kf.Q, kf.R_diag,
-                           self.pid, self._gains, s.use_estimate, s.derivative_from_velocity,
-                           noise, self._sigma, b.touchdown_clearance_m, self.memory, trace)
+
+        def part(first: int, last: int) -> tuple[int, int]:
+            return run(last - first, self.step + first, b.sample_time_s, self.plant, self._constants,
+                       self._plant[0], self._plant[1], s.nonlinear, s.gravity_n,
+                       self.coil, G_A, G_B, G_C, G_D, s.current_loop,
+                       kf._x, kf.P, kf.A, kf.B, kf.C, kf.Q, kf.R_diag,
+                       self.pid, self._gains, s.use_estimate, s.derivative_from_velocity,
+                       noise[first:last], self._sigma, b.touchdown_clearance_m, self.memory, trace[first:last])
+
+        # The last sample on its own, with the filter's prior kept for ``filter_state``.
+        status, done = part(0, n_steps - 1) if n_steps > 1 else (OK, 0)
+        if status == OK:
+            prior = kf._x.copy(), kf.P.copy()
+            y = np.array([self.plant[0] + self._sigma[0] * noise[-1, 0]])     # eq. 13: Z = x + V
+            status, last = part(n_steps - 1, n_steps)
+            done += last
+            self._last_correction = (*prior, y, trace[n_steps - 1, 0])
         trace[:done, 1 + len(KERNEL_COLUMNS):] = self._lines
         self.step += done
         self.status = status
@@ -311,6 +322,21 @@ class ThrustSimulation:
                                           zi=[a * getattr(self, "_coloured_last", self.rng.standard_normal())])
         self._coloured_last = out[-1]
         return out
+
+    def filter_state(self) -> dict | None:
+        """The Kalman filter (§3, eq. 13) at the last sample: corrected x̂ and P, gain K,
+        innovation and √S (see ``Simulation.filter_state``)."""
+        correction_in = getattr(self, "_last_correction", None)
+        if correction_in is None:
+            return None
+        x_prior, P_prior, y, time_s = correction_in
+        kf = self.filter
+        n = kf.dim_x
+        step = correction(x_prior[:n], P_prior[:n, :n], kf.C[:, :n], kf.R_diag, y)
+        return {"title": "Kalman filter of the thrust bearing (paper 003 §3)", "time_s": float(time_s),
+                "states": (("collar position x", "m"), ("collar velocity v", "m/s")), "x": step["x"],
+                "P": step["P"], "measurements": (("position sensor Z", "m"),), "K": step["K"],
+                "innovation": step["innovation"], "innovation_sigma": np.sqrt(np.diag(step["S"]))}
 
     def run(self, duration_s: float) -> dict[str, np.ndarray]:
         """``duration_s`` of simulation as columns (and ``time_s``)."""
