@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import viser
 
-from app import layout, margins, scope, worksheets
+from app import export, inspector, layout, margins, scope, worksheets
 from app.access import token_matches
 from app.store import Store, StoreError
 from app.traffic import callback
@@ -391,6 +391,7 @@ class LabSession:
         self.status = gui.add_markdown("**Running**")
         buttons = gui.add_button_group("Simulation", ("Run", "Pause", "Reset"))
         buttons.on_click(self._on("buttons", lambda: self._on_button(buttons.value)))
+        inspector.add_controls(self)                  # step one sample, the filter's numbers (app/inspector.py)
         if self.scene is not None:
             refresh = gui.add_dropdown("3D view", tuple(SCENE_REFRESH), initial_value=self.scene_refresh,
                                        hint="How often the 3D view follows the simulation. Smooth motion needs "
@@ -448,6 +449,7 @@ class LabSession:
             self.y_ranges = [scope.StickyRange() for _ in self.exercise.charts]
             self.charts = [self._add_chart(chart) for chart in self.exercise.charts]
             self.readouts = gui.add_markdown("*computing …*")
+            export.add_buttons(self)                  # CSV and PNG for a lab report (app/export.py)
         with self.tabs["Pole map"]:
             dominant, full = _pole_charts(first.poles)
             self.pole_plots = tuple(gui.add_uplot(data, **options, aspect=1.6) for data, options in (dominant, full))
@@ -584,6 +586,7 @@ class LabSession:
                 self._start_simulation_thread()       # never left without a simulation
             self.problems.clear()
             self.status.content = "**Running**" if self.running else "**Paused**"
+            inspector.refresh(self)
 
     def _reset(self) -> None:
         self.simulation = self.exercise.simulation(self.values)
