@@ -105,7 +105,8 @@ def chart_png(exercise: Exercise, chart: Chart, columns: tuple[str, ...], buffer
              else f"[{chart.unit}]")
     axes.legend(fontsize="x-small", loc="upper right")
     out = io.BytesIO()
-    FigureCanvasAgg(figure).print_png(out, dpi=PNG_DPI)
+    FigureCanvasAgg(figure)
+    figure.savefig(out, format="png", dpi=PNG_DPI)
     return out.getvalue()
 
 

@@ -62,9 +62,10 @@ def gain_unit(gain: float, unit: str, y_unit: str) -> tuple[float, str]:
 
 
 def markdown(state: dict | None, sample_time_s: float) -> str:
-    """The inspector's text for one ``filter_state()`` result (None: nothing stepped yet)."""
+    """The inspector's text for one ``filter_state()`` result (None: the last advance was no single step)."""
     if state is None:
-        return "*No sample yet: press Step one sample.*"
+        return ("*Press Step one sample: the filter is shown at that sample (the simulations keep "
+                "the filter's numbers only for single steps, so running costs nothing extra).*")
     x, P = np.asarray(state["x"], dtype=float), np.asarray(state["P"], dtype=float)
     sigma = np.sqrt(np.clip(np.diag(P), 0.0, None))
     t = state["time_s"]

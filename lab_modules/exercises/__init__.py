@@ -73,12 +73,12 @@ class Simulation(Protocol):
         """'' while running; a sentence saying why it stopped (touchdown, divergence ...)."""
 
     # Optional, for simulations with a Kalman filter (the app's filter inspector):
-    # ``filter_state() -> dict | None``: the filter at the last sample (None before the first),
-    # after its correction with that sample's measurement: ``title``, ``time_s``, ``states``
+    # ``filter_state() -> dict | None``: the filter at the sample of the last ``advance(1)``
+    # (None if the last advance ran more samples: the loops then keep nothing extra), after its
+    # correction with that sample's measurement: ``title``, ``time_s``, ``states``
     # ((label, SI unit), ...), ``x`` (n,), ``P`` (n, n), ``measurements`` ((label, unit), ...),
     # ``K`` (n, m), ``innovation`` (m,) and ``innovation_sigma`` (m,) = √diag(S) against the
-    # prior (K and the innovation None for a filter that corrects continuously).  ``advance(1)``
-    # steps one sample.
+    # prior (K and the innovation None for a filter that corrects continuously).
 
 
 class SceneView(Protocol):

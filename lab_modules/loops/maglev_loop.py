@@ -267,19 +267,18 @@ class MaglevSimulation:
                 s.sensor_noise_m**2, self.sample_time_s, CONTROLLERS.index(s.controller),
                 FILTERS.index(s.filter), s.filter_substeps, *self.lead_lag, self.u0, trace[first:last])
 
-        # The last sample on its own, with the filter's prior kept for ``filter_state``.
-        done, self.status = part(0, n_steps - 1) if n_steps > 1 else (0, OK)
-        if self.status == OK:
+        if n_steps == 1:                               # a single step (the inspector's) keeps the prior
             prior = self.x_hat.copy(), self.P.copy()
-            last, self.status = part(n_steps - 1, n_steps)
-            done += last
-            row = trace[n_steps - 1]
-            self._last_correction = (*prior, np.array([row[1 + COLUMN["x_measured_m"]]]), row[0])
+            done, self.status = part(0, 1)
+            self._last_correction = (*prior, np.array([trace[0, 1 + COLUMN["x_measured_m"]]]), trace[0, 0])
+        else:
+            done, self.status = part(0, n_steps)
+            self._last_correction = None
         self.steps += done
         return trace[:done]
 
     def filter_state(self) -> dict | None:
-        """The continuous-discrete EKF (eq. 2.40-2.42, H = [1 0 0]) at the last sample: corrected
+        """The continuous-discrete EKF (eq. 2.40-2.42, H = [1 0 0]) at the sample of the last advance(1): corrected
         x̂ and P, gain K, innovation and √S.  The continuous-time filters correct continuously
         (no sample gain): their x̂ and P only."""
         if self._last_correction is None:

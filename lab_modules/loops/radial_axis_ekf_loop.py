@@ -297,23 +297,22 @@ class EKFLoopSimulation:
                        self._feedforward, reference[first:last], disturbance[first:last], noise[first:last],
                        setup.noise_sigma, setup.rig.touchdown_m, trace[first:last])
 
-        # The last sample on its own, with the filter's prior kept for ``filter_state``.
-        status, done = part(0, n_steps - 1) if n_steps > 1 else (OK, 0)
-        if status == OK:
-            prior = self.x_hat.copy(), self.P.copy()
-            plant = self.plant.copy()
-            status, last = part(n_steps - 1, n_steps)
-            done += last
+        if n_steps == 1:                               # a single step (the inspector's) keeps the prior
+            prior, plant = (self.x_hat.copy(), self.P.copy()), self.plant.copy()
+            status, done = part(0, 1)
             K_mx, K_mi = self._plant_physics[9], self._plant_physics[10]
-            y = np.array([K_mx * plant[3] + setup.noise_sigma[2] * noise[-1, 2],
-                          K_mi * plant[2] + setup.noise_sigma[3] * noise[-1, 3]])
-            self._last_correction = (*prior, y, t[-1])
+            y = np.array([K_mx * plant[3] + setup.noise_sigma[2] * noise[0, 2],
+                          K_mi * plant[2] + setup.noise_sigma[3] * noise[0, 3]])
+            self._last_correction = (*prior, y, t[0])
+        else:
+            status, done = part(0, n_steps)
+            self._last_correction = None
         self.step += done
         self.status = status
         return np.column_stack([t[:done], trace[:done]])
 
     def filter_state(self) -> dict | None:
-        """The EKF at the last sample: corrected x̂ and P, gain K, innovation and √S
+        """The EKF at the sample of the last advance(1): corrected x̂ and P, gain K, innovation and √S
         (eq. 6; the measurement is linear, G = Gamma of eq. 9/14)."""
         if self._last_correction is None:
             return None

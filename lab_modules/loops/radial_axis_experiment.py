@@ -270,16 +270,15 @@ class AxisSimulation:
                 reference[first:last], disturbance[first:last], noise[first:last], self.setup.noise_sigma,
                 self.setup.rig.touchdown_m, trace[first:last])
 
-        # The last sample on its own, with the filter's prior kept for ``filter_state``
-        # (one more kernel call per advance; the loop itself is unchanged).
-        status, done = run(0, n_steps - 1) if n_steps > 1 else (radial_axis_loop.OK, 0)
-        if status == radial_axis_loop.OK:
+        if n_steps == 1:                               # a single step (the inspector's) keeps the prior
             prior = kf._x.copy(), kf.P.copy()
-            status, last = run(n_steps - 1, n_steps)
-            done += last
-            sigma, row = self.setup.noise_sigma, trace[n_steps - 1]
+            status, done = run(0, 1)
+            sigma, row = self.setup.noise_sigma, trace[0]
             self._last_correction = (*prior, np.array([row[2] * self._physics[9], row[5] * self._physics[10]
-                                                       + sigma[3] * float(noise[-1, 3])]), row[0])
+                                                       + sigma[3] * float(noise[0, 3])]), row[0])
+        else:
+            status, done = run(0, n_steps)
+            self._last_correction = None
         self.step += done
         self.status = status
         return trace[:done]
@@ -288,7 +287,7 @@ class AxisSimulation:
                     ("sensed position x_d (lag)", "m"))
 
     def filter_state(self) -> dict | None:
-        """The linear Kalman filter (eq. 2) at the last sample: its corrected estimate x̂ and P,
+        """The linear Kalman filter (eq. 2) at the sample of the last advance(1): its corrected estimate x̂ and P,
         the gain K, the innovation and its predicted σ = √S (see ``Simulation.filter_state``)."""
         if self._last_correction is None:
             return None
@@ -297,7 +296,7 @@ class AxisSimulation:
         step = correction(x_prior[:n], P_prior[:n, :n], kf.C[:, :n], kf.R_diag, y)
         return {"title": "Linear Kalman filter (paper 000, eq. 2)", "time_s": float(time_s),
                 "states": self.STATE_LABELS[:n], "x": step["x"], "P": step["P"],
-                "measurements": (("position sensor K_mx x_d", "V"), ("current sensor K_mi i", "V")),
+                "measurements": (("position sensor", "V"), ("current sensor", "V")),
                 "K": step["K"], "innovation": step["innovation"],
                 "innovation_sigma": np.sqrt(np.diag(step["S"]))}
 

@@ -301,14 +301,14 @@ class ThrustSimulation:
                        self.pid, self._gains, s.use_estimate, s.derivative_from_velocity,
                        noise[first:last], self._sigma, b.touchdown_clearance_m, self.memory, trace[first:last])
 
-        # The last sample on its own, with the filter's prior kept for ``filter_state``.
-        status, done = part(0, n_steps - 1) if n_steps > 1 else (OK, 0)
-        if status == OK:
+        if n_steps == 1:                               # a single step (the inspector's) keeps the prior
             prior = kf._x.copy(), kf.P.copy()
-            y = np.array([self.plant[0] + self._sigma[0] * noise[-1, 0]])     # eq. 13: Z = x + V
-            status, last = part(n_steps - 1, n_steps)
-            done += last
-            self._last_correction = (*prior, y, trace[n_steps - 1, 0])
+            y = np.array([self.plant[0] + self._sigma[0] * noise[0, 0]])     # eq. 13: Z = x + V
+            status, done = part(0, 1)
+            self._last_correction = (*prior, y, trace[0, 0])
+        else:
+            status, done = part(0, n_steps)
+            self._last_correction = None
         trace[:done, 1 + len(KERNEL_COLUMNS):] = self._lines
         self.step += done
         self.status = status
@@ -324,7 +324,7 @@ class ThrustSimulation:
         return out
 
     def filter_state(self) -> dict | None:
-        """The Kalman filter (§3, eq. 13) at the last sample: corrected x̂ and P, gain K,
+        """The Kalman filter (§3, eq. 13) at the sample of the last advance(1): corrected x̂ and P, gain K,
         innovation and √S (see ``Simulation.filter_state``)."""
         correction_in = getattr(self, "_last_correction", None)
         if correction_in is None:
