@@ -150,6 +150,9 @@ class AdaptiveFilterSimulation:
             errors.append(column(trace, f"{f}_force_n") - column(trace, "disturbance_n"))
         return np.column_stack([trace, *errors]) if trace.size else np.empty((0, 1 + len(self.columns)))
 
+    def filter_state(self) -> dict | None:
+        return self.loop.filter_state()
+
     def status_message(self) -> str:
         return self.loop.status_message()
 

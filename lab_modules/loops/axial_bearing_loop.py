@@ -33,6 +33,7 @@ from numba import njit
 
 from lab_modules.estimators.adaline import siso_step
 from lab_modules.estimators.fuzzy_basis_network import CENTRES, evaluate
+from lab_modules.estimators.kalman import correction
 from lab_modules.estimators.scheduled_kalman import (
     N_STATES,
     correct,
@@ -312,10 +313,31 @@ class LoopSimulation:
             self.rng.normal(0.0, np.sqrt(self.setup.plant_force_walk_n2), n_steps)
             if self.setup.plant_force_walk_n2 > 0 else np.zeros(n_steps)])
         out = np.empty((n_steps, 1 + len(COLUMNS)))
+        # a single step (the inspector's) keeps the filters' priors and the measurement for ``filter_state``
+        self._last_correction = ((self.filter_z.copy(), self.filter_P.copy(), self.state[S_XM] + noise[0, 0],
+                                  self.state[S_T]) if n_steps == 1 else None)
         n = run(n_steps, self.state, self.filter_z, self.filter_P, self.physics, self.schedule,
                 self.setup.period_s, self.setup.load_ramp_s, self.controller, self.setup.k_magnet, self.stencil,
                 self.fbf[0], self.fbf[1], self.fbf[2], self.fbf[3], CENTRES, self.adaline, noise, out)
         return out[:n]
+
+    def filter_state(self) -> dict | None:
+        """The filter the controller acts on (the FBFNN-scheduled one under measured feedback)
+        at the sample of the last advance(1): corrected z and P, gain K, innovation and √S
+        (eq. 11-13, H = (0, 0, 0, 1), R = var_sensor)."""
+        if getattr(self, "_last_correction", None) is None:
+            return None
+        z_prior, P_prior, y, time_s = self._last_correction
+        which = FILTERS.index("fbfnn" if self.setup.feedback == "measured" else self.setup.feedback)
+        step = correction(z_prior[which], P_prior[which], [[0.0, 0.0, 0.0, 1.0]], [self.setup.var_sensor_v2], [y])
+        names = {"fixed": "fixed k_i, k_s (§B)", "fbfnn": "k_i, k_s scheduled by the FBFNN (§D)",
+                 "lsm": "k_i, k_s scheduled by the LSM", "ekf": "EKF with the force law eq. 1"}
+        return {"title": f"Kalman filter of the axial bearing (paper 002): {names[FILTERS[which]]}",
+                "time_s": float(time_s), "x": step["x"], "P": step["P"],
+                "states": (("position x", "m"), ("velocity v", "m/s"), ("disturbance force F_St", "N"),
+                           ("sensor state x_M", "V")),
+                "measurements": (("position sensor", "V"),), "K": step["K"], "innovation": step["innovation"],
+                "innovation_sigma": np.sqrt(np.diag(step["S"]))}
 
     def status_message(self) -> str:
         if self.state[S_STOPPED] > 0:
