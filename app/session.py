@@ -29,6 +29,8 @@ import viser
 
 from app import layout, margins, scope, worksheets
 from app.access import token_matches
+from app.actions import ActionPanel
+from app.live import LivePlots, SpeedMeter
 from app.store import Store, StoreError
 from app.traffic import callback
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, registry
@@ -391,6 +393,8 @@ class LabSession:
         self.status = gui.add_markdown("**Running**")
         buttons = gui.add_button_group("Simulation", ("Run", "Pause", "Reset"))
         buttons.on_click(self._on("buttons", lambda: self._on_button(buttons.value)))
+        self.speed, self.speed_meter = gui.add_markdown(""), SpeedMeter()   # filled in while it runs
+        self.action_panel = ActionPanel(self, gui, _plot_chart)   # the exercise's buttons, if any
         if self.scene is not None:
             refresh = gui.add_dropdown("3D view", tuple(SCENE_REFRESH), initial_value=self.scene_refresh,
                                        hint="How often the 3D view follows the simulation. Smooth motion needs "
@@ -445,6 +449,7 @@ class LabSession:
         beside = self.beside
         with self.tabs["Scope"]:
             self.window_ms = self._window_rows() * self.simulation.sample_time_s * 1e3
+            self.live = LivePlots(gui, self.exercise, self.simulation)   # if the exercise has any
             self.y_ranges = [scope.StickyRange() for _ in self.exercise.charts]
             self.charts = [self._add_chart(chart) for chart in self.exercise.charts]
             self.readouts = gui.add_markdown("*computing …*")
@@ -584,6 +589,8 @@ class LabSession:
                 self._start_simulation_thread()       # never left without a simulation
             self.problems.clear()
             self.status.content = "**Running**" if self.running else "**Paused**"
+            if not self.running:
+                self.speed.content = ""
 
     def _reset(self) -> None:
         self.simulation = self.exercise.simulation(self.values)
@@ -716,9 +723,12 @@ class LabSession:
             if not self.running:
                 return carry, next_scene, next_readouts
             time_scale = self.values.get("time_scale", 1.0)
+            T = self.simulation.sample_time_s            # a retuned simulation may have another step
             carry += time_scale * elapsed / T
             steps, carry = int(carry), carry - int(carry)
+            started = time.thread_time()
             trace = self.simulation.advance(steps)
+            self.speed_meter.add(steps * T, time.thread_time() - started, elapsed)
             window = self._window_rows()
             self.buffer = np.concatenate([self.buffer, trace])[-window:]
             message = self.simulation.status_message()
@@ -729,8 +739,10 @@ class LabSession:
             if not self._current(generation):
                 return carry, next_scene, next_readouts
             self._draw()
+            self.live.draw(self.simulation, now, getattr(self, "drawn_until", None))
             if now >= next_readouts:
                 self._refresh_live_readouts()
+                self.speed.content = self.speed_meter.text()
                 next_readouts = now + LIVE_READOUT_PERIOD_S
             if message and self.simulation is stopped and not self.running:   # not reset meanwhile
                 self.status.content = f"**Stopped: {message}** Press Run or Reset to start again."
