@@ -24,7 +24,7 @@ import viser
 from app import scope
 from lab_modules.exercises import Exercise, Plot
 
-LIVE_PERIOD_S = 0.2               # live plots: at most 5 updates/s (each ~10 kB before compression)
+LIVE_PERIOD_S = 0.25              # live plots: at most 4 updates/s (self_sensing: ~14 kB per update)
 LIVE_ASPECT = 2.2                 # as the scope charts
 SHADE_FILL = "rgba(31,119,180,0.12)"
 HIDDEN = {"stroke": "rgba(0,0,0,0)", "width": 0, "points": viser.uplot.Series_Points(show=False)}
