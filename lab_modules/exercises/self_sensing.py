@@ -15,9 +15,11 @@ eq. 23) and §5 (noise σ(i), σ(v)), the resistance the estimator assumes, the
 window, T_a and T_pwm, the two operating points and the transition time of
 the paper's simulations (Fig. 2-7), v_bat.  Loop: the compiled 1 µs
 simulation of ``loops.self_sensing_loop`` (prescribed 4 → 6 → 4 mm motion,
-per-period duty controller).  Views: inductance, gap and errors per PWM
-period with ±3σ̂ bands, σ̂ traces; the Analysis tab shows the ripple of two
-periods with the fitted lines and a Monte-Carlo histogram.  Claims: §3-5 of
+per-period duty controller).  Views: a live ripple zoom of the newest two
+PWM periods (``live_plots``: every 8th sample, windows shaded, fitted lines);
+inductance, gap and errors per PWM period with ±3σ̂ bands, σ̂ traces; the
+Analysis tab shows the ripple at every sample and a histogram.  The button
+*Run Monte-Carlo* (``actions``) checks eq. 31 over 4 seeds.  Claims: §3-5 of
 the paper with the lab's parameter set (``plants.self_sensing_ball``).
 """
 
