@@ -723,12 +723,11 @@ class LabSession:
             if not self.running:
                 return carry, next_scene, next_readouts
             time_scale = self.values.get("time_scale", 1.0)
-            T = self.simulation.sample_time_s            # a retuned simulation may have another step
             carry += time_scale * elapsed / T
             steps, carry = int(carry), carry - int(carry)
             started = time.thread_time()
             trace = self.simulation.advance(steps)
-            self.speed_meter.add(steps * T, time.thread_time() - started, elapsed)
+            self.speed_meter.add(steps * self.simulation.sample_time_s, time.thread_time() - started, elapsed)
             window = self._window_rows()
             self.buffer = np.concatenate([self.buffer, trace])[-window:]
             message = self.simulation.status_message()
