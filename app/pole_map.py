@@ -35,7 +35,7 @@ from lab_modules.exercises import Exercise
 LIGHT_DAMPING = 0.3               # poles below this damping always belong to the dominant view
 LOCUS_POINTS = 48                 # factor values per root locus (geometric over the parameter's range)
 LOCUS_CACHE = 64                  # settings whose root locus is kept
-LABEL_GAP = 0.045                 # mode numbers closer than this share of the x range share one label
+LABEL_PX, CHAR_PX, LABEL_SPACE_PX = 470, 7, 6   # plot width, label character width, space between labels [px]
 MARGIN = 0.08                     # share of the pole span added on each side of a map
 #: Parameters that change nothing in the linear analysis (left out of the locus cache key)
 NOT_IN_LOCUS = {"seed", "time_scale", "shown_mode", "data"}
@@ -48,12 +48,12 @@ class Category:
     meaning: str
 
 
-#: The lab's pole categories, in drawing order (later on top).
+#: The lab's pole categories, in the order of the legend and the table.
 CATEGORIES = (
     Category("plant", "#7f7f7f", "plant / open loop (no feedback)"),
-    Category("regulator", "#2ca02c", "state-feedback regulator (A − B K)"),
-    Category("filter error", "#d62728", "filter error (A − A K C): how fast an estimate forgets its error"),
     Category("closed loop", "#1f77b4", "closed loop (plant, filter and controller together)"),
+    Category("filter error", "#d62728", "filter error (A − A K C): how fast an estimate forgets its error"),
+    Category("regulator", "#2ca02c", "state-feedback regulator (A − B K)"),
 )
 BY_NAME = {c.name: c for c in CATEGORIES}
 LOCUS_COLOR = "#9ecae1"           # the closed-loop colour, light: the root locus
@@ -117,7 +117,7 @@ class Mode:
                 return "unstable real pole (diverges)"
             if self.pole.real == 0:
                 return "integrator (s = 0)"
-            return f"real pole, τ = {_duration(-1.0 / self.pole.real)}"
+            return f"real, τ = {_duration(-1.0 / self.pole.real)}"
         if self.pole.real > 0:
             return "unstable oscillation"
         return "lightly damped oscillation" if self.damping < 0.1 else "oscillation"
@@ -271,22 +271,33 @@ def span(points: np.ndarray) -> tuple[tuple[float, float], tuple[float, float]]:
     return (low - MARGIN * width, high + MARGIN * width), (-(1 + MARGIN) * reach, (1 + MARGIN) * reach)
 
 
+def _label_text(group: list[Mode]) -> str:
+    numbers = sorted(m.number for m in group)
+    return ",".join(map(str, numbers)) if len(numbers) <= 2 else f"{numbers[0]},{numbers[1]},+{len(numbers) - 2}"
+
+
 def _labels(shown: list[Mode], x_range: tuple[float, float]) -> tuple[tuple[float, ...], tuple[str, ...]]:
-    """Top-axis positions and texts of the mode numbers; numbers closer than ``LABEL_GAP`` of
-    the range share one label ("3,7" or "3,7,+2")."""
-    gap = LABEL_GAP * (x_range[1] - x_range[0])
-    groups: list[list[Mode]] = []
-    for m in sorted(shown, key=lambda m: m.pole.real):
-        if groups and m.pole.real - groups[-1][0].pole.real < gap:
-            groups[-1].append(m)
-        else:
-            groups.append([m])
-    splits, texts = [], []
-    for group in groups:
-        numbers = sorted(m.number for m in group)
-        splits.append(float(np.mean([m.pole.real for m in group])))
-        texts.append(",".join(map(str, numbers)) if len(numbers) <= 2 else f"{numbers[0]},{numbers[1]},+{len(numbers) - 2}")
-    return tuple(splits), tuple(texts)
+    """Top-axis positions and texts of the mode numbers; labels that would overlap (at
+    ``LABEL_PX`` of plot width) merge into one ("3,7" or "3,7,+2": two more)."""
+    px_per_unit = LABEL_PX / (x_range[1] - x_range[0])
+
+    def centre(group: list[Mode]) -> float:
+        return float(np.mean([m.pole.real for m in group]))
+
+    def overlap(a: list[Mode], b: list[Mode]) -> bool:
+        room = (len(_label_text(a)) + len(_label_text(b))) * CHAR_PX / 2 + LABEL_SPACE_PX
+        return (centre(b) - centre(a)) * px_per_unit < room
+
+    groups = [[m] for m in sorted(shown, key=lambda m: m.pole.real)]
+    merged = True
+    while merged:
+        merged = False
+        for k in range(len(groups) - 1):
+            if overlap(groups[k], groups[k + 1]):
+                groups[k:k + 2] = [groups[k] + groups[k + 1]]
+                merged = True
+                break
+    return tuple(centre(g) for g in groups), tuple(_label_text(g) for g in groups)
 
 
 def pole_map(poles: dict[str, np.ndarray], title: str, shown: list[Mode] | None = None,
