@@ -30,10 +30,21 @@ def steady_state_kalman(model: control.StateSpace, Q, R):
     returned K is eq. 2's correction gain P C^T (C P C^T + R)^-1, not the
     predictor gain A K that ``dlqe`` itself returns.
     """
-    A, C = np.asarray(model.A), np.asarray(model.C)
-    _, P, _ = control.dlqe(A, np.eye(A.shape[0]), C, Q, R)
-    K = P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
-    return K, P
+    A, C, Q, R = (np.ascontiguousarray(M, dtype=float) for M in (model.A, model.C, Q, R))
+    key = tuple((M.shape, M.tobytes()) for M in (A, C, Q, R))
+    if key not in _kalman_cache:
+        _, P, _ = control.dlqe(A, np.eye(A.shape[0]), C, Q, R)
+        _kalman_cache[key] = (P @ C.T @ np.linalg.inv(C @ P @ C.T + R), P)
+        while len(_kalman_cache) > KALMAN_CACHE:
+            _kalman_cache.pop(next(iter(_kalman_cache)))
+    K, P = _kalman_cache[key]
+    return K.copy(), P.copy()
+
+
+#: Riccati solutions kept (the analysis, the pole map's root locus and the sweeps of one
+#: setting ask for the same filter; a solve takes milliseconds)
+KALMAN_CACHE = 64
+_kalman_cache: dict = {}
 
 
 @dataclass(frozen=True)
