@@ -22,6 +22,7 @@ exercise's own closed-loop poles).
 from __future__ import annotations
 
 import re
+import threading
 from collections import OrderedDict
 from dataclasses import dataclass
 
@@ -164,6 +165,7 @@ class Locus:
 
 
 _locus_cache: OrderedDict = OrderedDict()
+_locus_lock = threading.Lock()
 
 
 def locus_poles(exercise: Exercise, values: dict, factors: np.ndarray) -> np.ndarray:
@@ -186,15 +188,19 @@ def locus(exercise: Exercise, values: dict) -> Locus | None:
     parameter_name, set_name = exercise.locus
     key = (exercise.name, tuple(sorted((k, v) for k, v in values.items()
                                        if k not in NOT_IN_LOCUS and k != parameter_name)))
-    if key not in _locus_cache:
-        parameter = next(p for p in exercise.parameters if p.name == parameter_name)
-        factors = np.geomspace(parameter.minimum, parameter.maximum, LOCUS_POINTS)
-        _locus_cache[key] = (factors, locus_poles(exercise, values, factors))
-        while len(_locus_cache) > LOCUS_CACHE:
-            _locus_cache.popitem(last=False)
-    _locus_cache.move_to_end(key)
-    factors, poles = _locus_cache[key]
     parameter = next(p for p in exercise.parameters if p.name == parameter_name)
+    with _locus_lock:
+        cached = _locus_cache.get(key)
+        if cached is not None:
+            _locus_cache.move_to_end(key)
+    if cached is None:
+        factors = np.geomspace(parameter.minimum, parameter.maximum, LOCUS_POINTS)
+        cached = (factors, locus_poles(exercise, values, factors))
+        with _locus_lock:                             # the analysis threads of all tabs share it
+            _locus_cache[key] = cached
+            while len(_locus_cache) > LOCUS_CACHE:
+                _locus_cache.popitem(last=False)
+    factors, poles = cached
     unit = f" {parameter.unit}" if parameter.unit else ""
     label = (f"root locus: {set_name}, {parameter.label} {parameter.minimum:g}…{parameter.maximum:g}{unit} "
              f"(now {values[parameter_name]:g})")

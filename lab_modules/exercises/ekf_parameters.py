@@ -231,11 +231,8 @@ class EkfParameters(Exercise):
 
     def locus_matrices(self, values: dict, factors: tuple[float, ...]) -> tuple[list[np.ndarray], float]:
         """The linear loop's state matrices (the states in the feedback) at these PID gains K."""
-        axis, loops = linear_axis(values), []
-        for factor in factors:
-            loop = axis.loop(gain_factor=factor / values["pid_gain"])
-            loops.append(np.asarray(loop.system.A)[loop.loop_states, loop.loop_states])
-        return loops, T
+        axis = linear_axis(values)
+        return [axis.loop_matrix(factor / values["pid_gain"]) for factor in factors], T
 
     def simulation(self, values: dict) -> EKFLoopSimulation:
         return EKFLoopSimulation(setup(values), seed=int(values["seed"]))

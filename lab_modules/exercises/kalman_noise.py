@@ -207,11 +207,8 @@ class KalmanNoise(Exercise):
 
     def locus_matrices(self, values: dict, factors: tuple[float, ...]) -> tuple[list[np.ndarray], float]:
         """The loop's state matrices (the states in the feedback) at these gain factors."""
-        axis, loops = setup(values), []
-        for factor in factors:
-            loop = axis.loop(gain_factor=factor / values["gain_factor"])
-            loops.append(np.asarray(loop.system.A)[loop.loop_states, loop.loop_states])
-        return loops, T
+        axis = setup(values)
+        return [axis.loop_matrix(factor / values["gain_factor"]) for factor in factors], T
 
     def model(self, values: dict) -> dict:
         axis = setup(values)

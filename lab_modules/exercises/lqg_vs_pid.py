@@ -696,11 +696,8 @@ class LqgVsPid(Exercise):
 
     def locus_matrices(self, values: dict, factors: tuple[float, ...]) -> tuple[list[np.ndarray], float]:
         """The PID loop's state matrices (the states in the feedback) at these PID gains K."""
-        axis, loops = setups(values)["PID"], []
-        for factor in factors:
-            loop = axis.loop(gain_factor=factor / values["pid_gain"])
-            loops.append(np.asarray(loop.system.A)[loop.loop_states, loop.loop_states])
-        return loops, T
+        axis = setups(values)["PID"]
+        return [axis.loop_matrix(factor / values["pid_gain"]) for factor in factors], T
 
     def open_loops(self, values: dict) -> dict:
         return {name: axis.loop_at_plant_input() for name, axis in setups(values).items()}
