@@ -549,7 +549,10 @@ class LabSession:
             if parameter.name == "seed" or self.simulation.status_message():
                 self._reset()                         # a stopped run is not carried on (it touched down)
             else:
+                step_s = self.simulation.sample_time_s
                 self.simulation = self.exercise.retune(self.simulation, self.values)
+                if self.simulation.sample_time_s != step_s:
+                    self.buffer = self.buffer[:0]     # the scope's rows assume one sample time
         if self.scene is not None:
             try:
                 self.scene.update(dict(self.values))
@@ -695,7 +698,6 @@ class LabSession:
     def _run(self, generation: int) -> None:
         """The simulation thread: an error in one frame is reported and the next frame goes on."""
         carry, last, next_scene, next_readouts = 0.0, time.perf_counter(), 0.0, 0.0
-        T = self.simulation.sample_time_s
         next_frame = last
         while self._current(generation):
             next_frame += FRAME_S                     # a steady frame rate: the frame's own work is not added
@@ -709,12 +711,12 @@ class LabSession:
             now = time.perf_counter()
             elapsed, last = now - last, now
             try:
-                carry, next_scene, next_readouts = self._frame(generation, now, elapsed, T, carry,
+                carry, next_scene, next_readouts = self._frame(generation, now, elapsed, carry,
                                                                next_scene, next_readouts)
             except Exception as error:  # noqa: BLE001 - reported; the next frame goes on
                 self._problem("simulation", error)
 
-    def _frame(self, generation: int, now: float, elapsed: float, T: float, carry: float,
+    def _frame(self, generation: int, now: float, elapsed: float, carry: float,
                next_scene: float, next_readouts: float) -> tuple[float, float, float]:
         """One display frame: advance, draw, 3D view; returns the carried state."""
         period = SCENE_REFRESH[self.scene_refresh]
@@ -730,7 +732,7 @@ class LabSession:
             if not self.running:
                 return carry, next_scene, next_readouts
             time_scale = self.values.get("time_scale", 1.0)
-            carry += time_scale * elapsed / T
+            carry += time_scale * elapsed / self.simulation.sample_time_s   # a retune may change it
             steps, carry = int(carry), carry - int(carry)
             started = time.thread_time()
             trace = self.simulation.advance(steps)

@@ -19,6 +19,11 @@ RIPPLE_JS = """() => { const c = Object.values((window.__viserTestpoints || {}).
     return {series: c.data.length - 1, finite: c.data.slice(1).map(d => Array.from(d).filter(Number.isFinite).length),
             sum: Array.from(c.data[4]).reduce((a, b) => a + b, 0), y: [c.scales.y.min, c.scales.y.max]}; }"""
 
+#: the largest time shown by the scope chart titled ``title`` (ms; the newest sample is at 0)
+SCOPE_X_MAX_JS = """title => { const c = Object.values((window.__viserTestpoints || {}).uplots || {}).map(v => v.chart)
+    .find(c => ((c.root.querySelector('.u-title') || {}).innerText || '') === title);
+    return c ? Math.max(...Array.from(c.data[0]).filter(Number.isFinite)) : null; }"""
+
 
 def test_ripple_zoom_speed_readout_and_monte_carlo_button(open_tab, lab_server):
     _, server_log = lab_server
@@ -52,6 +57,15 @@ def test_ripple_zoom_speed_readout_and_monte_carlo_button(open_tab, lab_server):
     ratio = float(row.locator("td").nth(1).inner_text())
     assert 0.95 <= ratio <= 1.05, ratio
     page.get_by_text("Monte-Carlo at 4 mm: (L̄ − L)", exact=False).first.wait_for(timeout=5000)
+
+    # A new PWM period changes the sample time: the run keeps its time scale and the scope its window.
+    page.get_by_text("Sampling", exact=True).first.click()          # its folder starts closed
+    tab.set_number("T_pwm (fixed) [µs]", "2048")
+    time.sleep(3)
+    assert re.search(r"0\.2\d*× real time", speed.inner_text()), speed.inner_text()
+    chart = get("self_sensing").charts[0]
+    x_max = page.evaluate(SCOPE_X_MAX_JS, f"{chart.title} [{chart.unit}]")
+    assert x_max is not None and -50 <= x_max <= 0.5, x_max
     page.screenshot(path=str(server_log.parent / "self_sensing.png"))
     assert not tab.errors, tab.errors
     warnings = [line for line in server_log.read_text().splitlines() if "Traceback" in line or "Error" in line]
