@@ -43,7 +43,7 @@ from lab_modules.plants.axial_bearing import (
 ROOT = "/force_map_view"
 CURRENT_RANGE_A, POSITION_RANGE_M = 1.5, 0.5e-3
 HALF_WIDTH = 1.25                    # world units for half the current and half the position range
-HEIGHT = 2.2                         # world units for the plotted quantity's range
+HEIGHT = 3.0                         # world units for the plotted quantity's range
 SURFACE_POINTS = 25                  # live FBFNN surface: 25×25 vertices
 FORCE_POINTS = 31
 NODE_BLACK, WIRE_GREY, AXIS_GREY = (20, 20, 20), (110, 110, 110), (90, 90, 90)
@@ -104,7 +104,7 @@ def colormap(values: np.ndarray, lo: float, hi: float, anchors: np.ndarray) -> n
     return np.stack([np.interp(t, stops, anchors[:, k]) for k in range(3)], axis=-1).round().astype(np.uint8)
 
 
-DIVERGING = np.array([[40, 80, 200], [235, 235, 235], [200, 40, 40]], float)       # −, 0, +
+DIVERGING = np.array([[25, 70, 215], [235, 235, 235], [215, 30, 30]], float)       # −, 0, +
 HEAT = np.array([[250, 250, 240], [250, 220, 90], [240, 120, 30], [190, 20, 20], [90, 0, 30]], float)
 
 
@@ -119,6 +119,14 @@ def error_heat_map(network, target: np.ndarray, scale: float = 1.0) -> np.ndarra
     currents, positions = test_grid()
     n = round(np.sqrt(currents.size))
     return (np.abs(network.predict(currents, positions) - target) * scale).reshape(n, n)
+
+
+def nice_ceiling(value: float) -> float:
+    """The next of 1, 2, 5 × 10^n at or above ``value`` (a colour scale that does not jitter)."""
+    if not np.isfinite(value) or value <= 0:
+        return 1.0
+    base = 10.0 ** np.floor(np.log10(value))
+    return float(next(m * base for m in (1.0, 2.0, 5.0, 10.0) if m * base >= value * (1 - 1e-12)))
 
 
 def box_lines() -> np.ndarray:
@@ -150,17 +158,17 @@ class _ForceMapBase:
         h, z0 = HALF_WIDTH, -HEIGHT / 2
         for i in (-1.5, 0.0, 1.5):
             scene.add_label(f"{ROOT}/ticks/i{i:g}", f"{i:g}", position=to_world(i, -0.5e-3, 0.0, FORCE_AXIS)
-                            * (1, 1, 0) + (0.12, 0, z0), anchor="top-center", **LABEL)
+                            * (1, 1, 0) + (0.12, 0, z0), anchor="top-right", **LABEL)
         scene.add_label(f"{ROOT}/ticks/i_title", "i [A]", position=(h + 0.35, 0.0, z0), anchor="top-center", **LABEL)
         for x_mm in (-0.5, 0.0, 0.5):
             scene.add_label(f"{ROOT}/ticks/x{x_mm:g}", f"{x_mm:g}",
                             position=to_world(1.5, x_mm * 1e-3, 0.0, FORCE_AXIS) * (1, 1, 0) + (0, 0.12, z0),
-                            anchor="top-center", **LABEL)
+                            anchor="top-left", **LABEL)
         scene.add_label(f"{ROOT}/ticks/x_title", "x [mm]", position=(0.0, h + 0.35, z0), anchor="top-center",
                         **LABEL)
         self.handles["title"] = scene.add_label(f"{ROOT}/title", "", position=(0.0, 0.0, HEIGHT / 2 + 0.45),
                                                 anchor="bottom-center", **LABEL)
-        self.handles["legend"] = scene.add_label(f"{ROOT}/legend", "", position=(0.0, 0.0, -HEIGHT / 2 - 0.9),
+        self.handles["legend"] = scene.add_label(f"{ROOT}/legend", "", position=(HALF_WIDTH, HALF_WIDTH, -HEIGHT / 2 - 0.9),
                                                  anchor="top-center", **LABEL)
 
     def _z_axis(self, axis: Axis) -> None:
@@ -204,10 +212,14 @@ class _ForceMapBase:
 
 
 def plane_patch(i_node: float, x_node: float, plane: Callable[[np.ndarray, np.ndarray], np.ndarray],
-                axis: Axis = FORCE_AXIS) -> tuple[np.ndarray, np.ndarray]:
-    """A 9×9 patch of a plane F = plane(i, x) one grid step either side of the node (inside the range)."""
-    i = np.linspace(max(i_node - 0.75, -1.5), min(i_node + 0.75, 1.5), 9)
-    x = np.linspace(max(x_node - 0.25e-3, -0.5e-3), min(x_node + 0.25e-3, 0.5e-3), 9)
+                axis: Axis = FORCE_AXIS, through_origin: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """A 9×9 patch of a plane F = plane(i, x) one grid step either side of the node (inside the
+    range); ``through_origin`` stretches it to the centre (i, x) = (0, 0), where a plane without a
+    constant term passes through F = 0."""
+    i_lo, i_hi = (min(i_node, 0.0), max(i_node, 0.0)) if through_origin else (i_node, i_node)
+    x_lo, x_hi = (min(x_node, 0.0), max(x_node, 0.0)) if through_origin else (x_node, x_node)
+    i = np.linspace(max(i_lo - 0.75, -1.5), min(i_hi + 0.75, 1.5), 9)
+    x = np.linspace(max(x_lo - 0.25e-3, -0.5e-3), min(x_hi + 0.25e-3, 0.5e-3), 9)
     ii, xx = np.meshgrid(i, x, indexing="xy")
     return surface(i, x, plane(ii, xx), axis)
 
@@ -227,7 +239,6 @@ class StiffnessMapScene(_ForceMapBase):
         self.live_key = None
         self.shown_epoch = -1
         self.shown_key = None
-        self.heat_max: dict[str, float] = {}
 
     # -- SceneView ---------------------------------------------------------------------
     def attach(self, scene) -> None:
@@ -281,13 +292,13 @@ class StiffnessMapScene(_ForceMapBase):
         vertices, faces = plane_patch(i_n, x_n, lambda i, x: f_n + kit * (i - i_n) + kst * (x - x_n))
         self._replace("tangent", lambda: self.scene.add_mesh_simple(
             f"{ROOT}/tangent", vertices, faces, color=TANGENT_GREY, opacity=0.7, **NO_SHADOWS))
-        vertices_fit, faces_fit = plane_patch(i_n, x_n, fitted)
+        vertices_fit, faces_fit = plane_patch(i_n, x_n, fitted, through_origin=not intercept)
         self._replace("fit", lambda: self.scene.add_mesh_simple(
             f"{ROOT}/fit", vertices_fit, faces_fit, color=LSM_RED, opacity=0.7, **NO_SHADOWS))
         self._replace("node", lambda: self.scene.add_icosphere(
             f"{ROOT}/node", 0.06, (255, 200, 0), position=tuple(to_world(i_n, x_n, f_n, FORCE_AXIS)), **NO_SHADOWS))
-        miss = ki * i_n + ks * x_n - f_n
-        model = "plane with constant" if intercept else f"no-constant plane (red) misses F by {miss:+.2f} N"
+        model = ("LSM with a constant: nearly the tangent plane" if intercept else
+                 "LSM without constant: through the node and F = 0 at the centre")
         self.handles["title"].text = "Force F(i, x), eq. 1: 25 nodes, tangent (grey) and LSM plane (red)"
         self.handles["legend"].text = "\n".join([
             f"node i = {i_n:g} A, x = {x_n * 1e3:g} mm (yellow): F = {f_n:.2f} N",
@@ -328,11 +339,7 @@ class StiffnessMapScene(_ForceMapBase):
         currents, positions = test_grid()
         target = lsm(self.values, currents, positions)[0 if mode == "k_i" else 1]
         heat = error_heat_map(network, target, scale)
-        if (mode, key) not in self.heat_max:      # colour scale: the untrained network's largest error
-            untrained = training(self.values)
-            self.heat_max[mode, key] = float(np.max(error_heat_map(
-                untrained.ki if mode == "k_i" else untrained.ks, target, scale)))
-        top = self.heat_max[mode, key]
+        top = nice_ceiling(float(np.max(heat)))   # colour scale: the present largest error, rounded up
         i = np.linspace(-1.5, 1.5, SURFACE_POINTS)
         x = np.linspace(-0.5e-3, 0.5e-3, SURFACE_POINTS)
         ii, xx = np.meshgrid(i, x, indexing="xy")
@@ -353,7 +360,7 @@ class StiffnessMapScene(_ForceMapBase):
         self.handles["legend"].text = "\n".join([
             f"FBFNN epoch {epoch}: test RMSE {rmse:.3f} {axis.unit}",
             f"max |FBFNN − LSM| {float(np.max(heat)):.3f} {axis.unit}",
-            f"colour and floor: |FBFNN − LSM| 0 (white) … {top:.2f} {axis.unit} (dark red)",
+            f"colour and floor: |FBFNN − LSM| 0 (white) … {top:g} {axis.unit} (dark red)",
             "floor: the 41×41 test grid"])
 
 
