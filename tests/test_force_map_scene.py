@@ -109,7 +109,7 @@ def test_coloured_mesh_keeps_both_windings_and_one_colour_per_vertex():
 
 
 def test_nice_ceiling():
-    assert [fm.nice_ceiling(v) for v in (0.037, 0.1, 0.3751, 1.59, 7.0, 0.0)] == [0.05, 0.1, 0.5, 2.0, 10.0, 1.0]
+    assert [fm.nice_ceiling(v) for v in (0.037, 0.1, 0.3751, 1.59, 7.0, 2.354, 0.0)] == [0.04, 0.1, 0.4, 2.0, 8.0, 3.0, 1.0]
 
 
 # -- the stiffness map's view ----------------------------------------------------------------------

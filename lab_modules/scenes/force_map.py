@@ -47,7 +47,7 @@ HEIGHT = 3.0                         # world units for the plotted quantity's ra
 SURFACE_POINTS = 25                  # live FBFNN surface: 25×25 vertices
 FORCE_POINTS = 31
 NODE_BLACK, WIRE_GREY, AXIS_GREY = (20, 20, 20), (110, 110, 110), (90, 90, 90)
-TANGENT_GREY, LSM_RED, MARKER_GREEN = (150, 150, 150), (214, 39, 40), (44, 160, 44)
+TANGENT_GREY, LSM_RED, MARKER_GREEN = (185, 185, 185), (235, 60, 60), (44, 160, 44)
 LABEL = {"font_screen_scale": 0.75}
 NO_SHADOWS = {"cast_shadow": False, "receive_shadow": False}
 PATH_POINTS = 12                     # the marker's recent positions (one per 3D update)
@@ -105,7 +105,7 @@ def colormap(values: np.ndarray, lo: float, hi: float, anchors: np.ndarray) -> n
 
 
 DIVERGING = np.array([[25, 70, 215], [235, 235, 235], [215, 30, 30]], float)       # −, 0, +
-HEAT = np.array([[250, 250, 240], [250, 220, 90], [240, 120, 30], [190, 20, 20], [90, 0, 30]], float)
+HEAT = np.array([[255, 255, 200], [250, 200, 40], [240, 110, 20], [200, 30, 40], [100, 10, 90]], float)
 
 
 def coloured_mesh(vertices: np.ndarray, faces: np.ndarray, colors: np.ndarray) -> trimesh.Trimesh:
@@ -122,11 +122,11 @@ def error_heat_map(network, target: np.ndarray, scale: float = 1.0) -> np.ndarra
 
 
 def nice_ceiling(value: float) -> float:
-    """The next of 1, 2, 5 × 10^n at or above ``value`` (a colour scale that does not jitter)."""
+    """The next of 1, 1.5, 2, 3, 4, 5, 6, 8 × 10^n at or above ``value`` (a colour scale that does not jitter)."""
     if not np.isfinite(value) or value <= 0:
         return 1.0
     base = 10.0 ** np.floor(np.log10(value))
-    return float(next(m * base for m in (1.0, 2.0, 5.0, 10.0) if m * base >= value * (1 - 1e-12)))
+    return float(next(m * base for m in (1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0) if m * base >= value * (1 - 1e-12)))
 
 
 def box_lines() -> np.ndarray:
@@ -360,7 +360,7 @@ class StiffnessMapScene(_ForceMapBase):
         self.handles["legend"].text = "\n".join([
             f"FBFNN epoch {epoch}: test RMSE {rmse:.3f} {axis.unit}",
             f"max |FBFNN − LSM| {float(np.max(heat)):.3f} {axis.unit}",
-            f"colour and floor: |FBFNN − LSM| 0 (white) … {top:g} {axis.unit} (dark red)",
+            f"colour and floor: |FBFNN − LSM| 0 (pale) … {top:g} {axis.unit} (purple)",
             "floor: the 41×41 test grid"])
 
 
