@@ -104,7 +104,7 @@ def colormap(values: np.ndarray, lo: float, hi: float, anchors: np.ndarray) -> n
     return np.stack([np.interp(t, stops, anchors[:, k]) for k in range(3)], axis=-1).round().astype(np.uint8)
 
 
-DIVERGING = np.array([[25, 70, 215], [235, 235, 235], [215, 30, 30]], float)       # −, 0, +
+DIVERGING = np.array([[0, 45, 200], [235, 235, 235], [215, 30, 30]], float)       # −, 0, +
 HEAT = np.array([[255, 255, 200], [250, 200, 40], [240, 110, 20], [200, 30, 40], [100, 10, 90]], float)
 
 
