@@ -186,12 +186,15 @@ def test_view_replays_the_simulations_training_and_draws_its_error(values):
     assert np.array_equal(view.live.ks.widths, simulation.ks.widths)
     legend = scene.nodes[f"{fm.ROOT}/legend"].text
     assert f"epoch {epoch}: test RMSE {simulation.rmse[0]:.3f} N/A" in legend
-    heat = scene.nodes[f"{fm.ROOT}/heat"].args[0]                             # a trimesh with vertex colours
-    assert len(heat.vertices) == 41 * 41
-    # the heat mesh's colours follow |FBFNN − LSM|: the darkest vertex sits at the largest error
+    heat = scene.nodes[f"{fm.ROOT}/heat"]                                     # 41×41 coloured squares
+    assert len(heat.args[0]) == 41 * 41
+    # the heat map's colours follow |FBFNN − LSM|: the darkest square sits at the largest error
     error = error_maps(values, simulation.ki, simulation.ks)[0].ravel()
-    brightness = heat.visual.vertex_colors[:, :3].astype(int).sum(axis=1)
+    brightness = np.asarray(getattr(heat, "colors", heat.args[1])).astype(int).sum(axis=1)
     assert brightness[np.argmax(error)] == brightness.min()
+    # a later epoch sends the colours only
+    view.animate(1.5, {"fbfnn_epoch": float(epoch + 5)})
+    assert scene.nodes[f"{fm.ROOT}/heat"] is heat and len(heat.colors) == 41 * 41
     # a restart (fewer epochs than shown) trains again from the start
     view.animate(2.0, {"fbfnn_epoch": 3.0})
     fresh = live_training(values)

@@ -194,7 +194,7 @@ class _ForceMapBase:
     def _drop(self, *keys: str) -> None:
         for key in keys:
             handle = self.handles.pop(key, None)
-            if handle is not None:
+            if handle is not None and hasattr(handle, "remove"):
                 handle.remove()
 
     def _force_surface(self) -> None:
@@ -271,6 +271,7 @@ class StiffnessMapScene(_ForceMapBase):
         self._z_axis(AXES[mode])
         if mode == "force":
             self._drop("fbfnn", "heat", "lsm_wire", "table")
+            self.handles.pop("heat_mode", None)
             self._force_surface()
             self._planes()
         else:
@@ -348,12 +349,18 @@ class StiffnessMapScene(_ForceMapBase):
         vertices, faces = surface(i, x, values, axis)
         mesh = coloured_mesh(vertices, faces, colormap(error.ravel(), 0.0, top, HEAT))
         self._replace("fbfnn", lambda: self.scene.add_mesh_trimesh(f"{ROOT}/fbfnn", mesh, **NO_SHADOWS))
-        n = heat.shape[0]
-        grid_i, grid_x = np.linspace(-1.5, 1.5, n), np.linspace(-0.5e-3, 0.5e-3, n)
-        floor, floor_faces = surface(grid_i, grid_x, np.full((n, n), axis.lo), axis)
-        floor[:, 2] -= 0.01                                   # just under the floor grid
-        heat_mesh = coloured_mesh(floor, floor_faces, colormap(heat.ravel(), 0.0, top, HEAT))
-        self._replace("heat", lambda: self.scene.add_mesh_trimesh(f"{ROOT}/heat", heat_mesh, **NO_SHADOWS))
+        heat_colors = colormap(heat.ravel(), 0.0, top, HEAT)
+        if self.handles.get("heat_mode") == mode and "heat" in self.handles:
+            self.handles["heat"].colors = heat_colors             # positions stay: send the colours only
+        else:
+            n = heat.shape[0]
+            grid_i, grid_x = np.meshgrid(np.linspace(-1.5, 1.5, n), np.linspace(-0.5e-3, 0.5e-3, n), indexing="xy")
+            floor = to_world(grid_i, grid_x, axis.lo, axis).reshape(-1, 3)
+            floor[:, 2] -= 0.01                                   # just under the floor grid
+            self._replace("heat", lambda: self.scene.add_point_cloud(
+                f"{ROOT}/heat", floor.astype(np.float32), heat_colors, point_size=2 * HALF_WIDTH / (n - 1),
+                point_shape="square", point_shading="flat"))
+            self.handles["heat_mode"] = mode
         rmse = float(np.sqrt(np.mean(heat**2)))
         self.handles["title"].text = (f"{axis.label} map: FBFNN (coloured by its error), LSM map (grey wire), "
                                       f"Table {'4' if mode == 'k_i' else '5'} (dots)")
