@@ -21,37 +21,26 @@ from lab_modules.exercises.stiffness_map import (
 )
 from lab_modules.plants.axial_bearing import AXIAL, N_PER_MM
 from lab_modules.scenes import force_map as fm
+from tests.test_bearing_scene import RecordingScene as BearingRecordingScene
 
 
-class Handle:
-    """A scene node: its creation arguments, every property set later, removed or not."""
-
-    def __init__(self, scene, kind, name, args, kwargs):
-        self.scene, self.kind, self.name, self.args = scene, kind, name, args
-        self.removed = False
-        self.__dict__.update(kwargs)
-
-    def remove(self):
-        self.removed = True
-        if self.scene.nodes.get(self.name) is self:
-            del self.scene.nodes[self.name]
-
-
-class RecordingScene:
-    def __init__(self):
-        self.nodes: dict[str, Handle] = {}
-
-    def set_up_direction(self, direction):
-        self.up = direction
+class RecordingScene(BearingRecordingScene):
+    """The bearing tests' stand-in for viser's SceneApi, whose nodes can also be removed."""
 
     def __getattr__(self, method):
-        if not method.startswith("add_"):
-            raise AttributeError(method)
+        add = super().__getattr__(method)
 
-        def add(name, *args, **kwargs):
-            self.nodes[name] = Handle(self, method, name, args, kwargs)
-            return self.nodes[name]
-        return add
+        def add_removable(name, *args, **kwargs):
+            handle = add(name, *args, **kwargs)
+            handle.removed = False
+
+            def remove():
+                handle.removed = True
+                if self.nodes.get(name) is handle:
+                    del self.nodes[name]
+            handle.remove = remove
+            return handle
+        return add_removable
 
 
 def normals(vertices, faces):
