@@ -68,3 +68,26 @@ def test_stiffness_surfaces_and_operating_point_marker(open_tab):
     assert _pixels(page, "green") > 30, "no operating-point marker"
     assert _view_changes(page), "the operating-point marker does not move"
     assert not tab.errors, tab.errors
+
+
+TITLES_JS = """() => [...document.querySelectorAll('.u-title')].filter(e => e.offsetParent !== null)
+    .map(e => e.innerText)"""
+
+
+def test_analysis_tab_shows_the_plots_of_the_full_analysis(open_tab):
+    """stiffness_map yields a quick analysis (4 plots) and then the full one (10): the Analysis tab
+    must show all ten, among them the MISO ADALINE's force and weights."""
+    tab = open_tab()
+    page = tab.page
+    page.get_by_text("Running").first.wait_for(timeout=60000)
+    tab.switch_exercise(get("stiffness_map").title)
+    tab.open_panel_tab("Analysis")
+    deadline = time.time() + 60
+    titles = page.evaluate(TITLES_JS)
+    while len(titles) < 10 and time.time() < deadline:
+        time.sleep(1.0)
+        titles = page.evaluate(TITLES_JS)
+    assert len(titles) == 10, titles
+    assert any(t.startswith("MISO ADALINE: magnet force") for t in titles), titles
+    assert any(t.startswith("MISO ADALINE weights") for t in titles), titles
+    assert not tab.errors, tab.errors
