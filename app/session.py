@@ -650,7 +650,8 @@ class LabSession:
             self.client.flush()                       # the readouts go out now, not with the next window
             for handle, plot in zip(self.plots, result.plots):
                 data, options = _plot_chart(plot)
-                handle.data, handle.scales = data, options["scales"]
+                handle.data, handle.scales, handle.title = data, options["scales"], options["title"]
+            self._add_plots(result.plots[len(self.plots):])
             exercise, values = self.exercise, dict(self.values)
         poles = pole_map.view(exercise, values, result.poles)   # the root locus: cached per setting
         with self.gui_lock:
@@ -664,6 +665,16 @@ class LabSession:
                         handle.scales, handle.title = options["scales"], options["title"]
                     self.pole_table.content = pole_map.table_markdown(result.poles)
         return True
+
+    def _add_plots(self, plots: list[Plot]) -> None:
+        """Analysis plots beyond those the tab has: an analysis that yields a quick result
+        first brings the rest later (call holding ``gui_lock``)."""
+        if not plots:
+            return
+        with self.tabs["Analysis"]:
+            for plot in plots:
+                data, options = _plot_chart(plot)
+                self.plots.append(self.client.gui.add_uplot(data, **options, aspect=2.0))
 
     def _readouts_markdown(self, result: Analysis) -> str:
         """The readouts table: the analysis's figures, then the exercise's figures of the scope window."""
