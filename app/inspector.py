@@ -12,6 +12,7 @@ with an SI prefix chosen per row, so x̂ and its σ share one unit.
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 import viser
@@ -140,4 +141,6 @@ def step_one(session) -> None:
         session.status.content = (f"**Stopped: {message}** Press Run or Reset to start again." if message
                                   else "**Paused** (stepping one sample at a time)")
         session._draw()
+        if getattr(session, "live", None) is not None:       # the exercise's live plots follow the step
+            session.live.draw(session.simulation, time.perf_counter(), getattr(session, "drawn_until", None))
         refresh(session)
