@@ -10,6 +10,7 @@ functions (poles, step responses) apply directly.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import control
@@ -388,7 +389,8 @@ def loop_margins(open_loop, omega: np.ndarray | None = None) -> Margins:
     # L is real at ω = 0 (and at the Nyquist frequency of a discrete loop): a crossing there
     # (an unstable plant under a loop without integrator: the lower gain margin) has no sign change
     for point in ((1.0, -1.0) if open_loop.dt else (0.0,)):
-        with np.errstate(all="ignore"):
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore")              # singular at z = 1 for a loop with an integrator
             value = complex(np.squeeze(open_loop(point)))
         if np.isfinite(value) and value.real < 0 and abs(value.imag) <= 1e-9 * abs(value):
             gains.append(1.0 / abs(value))
