@@ -360,8 +360,19 @@ def frequency_grid(system, points: int = 800, low_rad_s: float = 1.0) -> np.ndar
 
 
 def open_loop_response(open_loop, omega) -> np.ndarray:
-    """L(jω) (or L(e^{jωT})) of a SISO system on ``omega`` [rad/s]."""
-    return np.asarray(np.squeeze(control.frequency_response(open_loop, np.atleast_1d(omega)).complex))
+    """L(jω) (or L(e^{jωT})) of a SISO system on ``omega`` [rad/s]: for a state space one batched
+    solve of (zI - A) x = B (what python-control's ``frequency_response`` returns, without its
+    per-call overhead: the margin search evaluates single frequencies many times)."""
+    if not isinstance(open_loop, control.StateSpace):
+        return np.asarray(np.squeeze(control.frequency_response(open_loop, np.atleast_1d(omega)).complex))
+    A, B, C, D = (np.asarray(M, dtype=float) for M in (open_loop.A, open_loop.B, open_loop.C, open_loop.D))
+    w = np.atleast_1d(np.asarray(omega, dtype=float))
+    z = np.exp(1j * w * open_loop.dt) if open_loop.dt else 1j * w
+    if A.shape[0] == 0:
+        return np.squeeze(np.full(w.shape, D[0, 0], dtype=complex))
+    with np.errstate(all="ignore"):
+        x = np.linalg.solve(z[:, None, None] * np.eye(A.shape[0]) - A, np.broadcast_to(B[:, :1], (w.size,) + B[:, :1].shape))
+    return np.squeeze(x[..., 0] @ C[0] + D[0, 0])
 
 
 def _roots(f, omega: np.ndarray, values: np.ndarray) -> list[float]:

@@ -55,7 +55,7 @@ def test_bearing_loop_margins_bracket_stability(feedback):
     assert m.sensitivity_peak == pytest.approx(_direct_sensitivity_peak(loop, omega), rel=0.01)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        _, pm_frd, _, _ = control.margin(control.frd(loop, omega))
+        _, pm_frd, _, _ = control.margin(control.frd(loop, omega[::4]))
     assert m.phase_margin_deg == pytest.approx(pm_frd, rel=0.01)
     assert m.zone == analysis.iso_zone(m.sensitivity_peak)
 
@@ -92,7 +92,9 @@ CASES = [(name, settings) for name, variants in VARIANTS.items() for settings in
 
 
 def _closed_loop_radius(loop, gain: float) -> float:
-    poles = np.asarray(control.feedback(gain * loop, 1).poles())
+    """Spectral radius (largest real part if continuous) of 1 / (1 + g L) closed: A - g B (1 + g D)^-1 C."""
+    A, B, C, D = (np.asarray(M, dtype=float) for M in (loop.A, loop.B, loop.C, loop.D))
+    poles = np.linalg.eigvals(A - gain * B @ np.linalg.solve(np.eye(D.shape[0]) + gain * D, C))
     return float(np.max(np.abs(poles))) if loop.dt else float(np.max(poles.real))
 
 
@@ -100,7 +102,7 @@ def _stable(loop, gain: float) -> bool:
     return _closed_loop_radius(loop, gain) < (1.0 if loop.dt else 0.0)
 
 
-def _stability_edge(loop, upwards: bool, tolerance: float = 1e-4) -> float:
+def _stability_edge(loop, upwards: bool, tolerance: float = 1e-3) -> float:
     """The common gain factor, from 1 up (or down), where the closed loop first loses stability:
     bisection on the closed loop's poles (inf / 0 when none before 1e4 / 1e-4)."""
     inside, step = 1.0, (2.0 if upwards else 0.5)
@@ -132,14 +134,14 @@ def test_margins_of_every_loop(name, settings):
     dense = None
     for label, loop in exercise.open_loops(values).items():
         m = analysis.loop_margins(loop, analysis.frequency_grid(loop, points=MARGIN_GRID_POINTS))
-        dense = analysis.frequency_grid(loop, points=30000)
+        dense = analysis.frequency_grid(loop, points=20000)
         # |S|max against 1 / |1 + C (zI - A)^-1 B + D| on a dense grid
         assert m.sensitivity_peak == pytest.approx(_direct_sensitivity_peak(loop, dense), rel=0.01), label
         assert m.zone == (analysis.iso_zone(m.sensitivity_peak) if m.stable else "D")
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            gm_frd, pm_frd, _, wc_frd = control.margin(control.frd(loop, dense))
-            gm_ss, pm_ss, _, _ = control.margin(loop)
+            gm_frd, pm_frd, _, wc_frd = control.margin(control.frd(loop, dense[::4]))
+            gm_ss, _, _, _ = control.margin(loop)
         # phase margin and crossover: python-control on the frequency response (valid for any loop)
         assert m.phase_margin_deg == pytest.approx(abs(pm_frd), rel=0.01), label
         assert m.gain_crossover_rad_s == pytest.approx(wc_frd, rel=0.01), label
