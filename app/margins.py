@@ -69,7 +69,7 @@ def _margin_readouts(name: str, m: analysis.Margins) -> list[tuple[str, float, s
         rows += [(f"{name}: gain margin down", m.gain_margin_down, "×"),
                  (f"{name}: gain margin down", _decibels(m.gain_margin_down), "dB")]
     rows += [(f"{name}: phase margin", m.phase_margin_deg, "°"),
-             (f"{name}: gain crossover |L| = 1", m.gain_crossover_rad_s / (2 * np.pi), "Hz"),
+             (f"{name}: gain crossover frequency", m.gain_crossover_rad_s / (2 * np.pi), "Hz"),
              (f"{name}: |S|max, ISO 14839-3 zone {m.zone}", m.sensitivity_peak, "×"),
              (f"{name}: |S|max, ISO 14839-3 zone {m.zone}", _decibels(m.sensitivity_peak), "dB")]
     return rows

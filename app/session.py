@@ -104,6 +104,11 @@ def escaped(text) -> str:
     return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
 
 
+def _cell(text: str) -> str:
+    """A readout's label or unit as one Markdown table cell: "|S|max" must not end the cell."""
+    return str(text).replace("|", "\\|")
+
+
 def _format(value: float) -> str:
     if np.isnan(value):
         return "…"
@@ -651,11 +656,11 @@ class LabSession:
     def _readouts_markdown(self, result: Analysis) -> str:
         """The readouts table: the analysis's figures, then the exercise's figures of the scope window."""
         lines = ["| quantity | value | unit |", "|---|---:|---|"]
-        lines += [f"| {label} | {_format(value)} | {unit} |" for label, value, unit in result.readouts]
+        lines += [f"| {_cell(label)} | {_format(value)} | {_cell(unit)} |" for label, value, unit in result.readouts]
         with self.lock:
             trace = {name: self.buffer[:, column] for name, column in self.columns.items()}
         if len(next(iter(trace.values()), ())) >= 10:
-            lines += [f"| {label} (scope window) | {_format(value)} | {unit} |"
+            lines += [f"| {_cell(label)} (scope window) | {_format(value)} | {_cell(unit)} |"
                       for label, value, unit in self.exercise.live_readouts(trace)]
         return "\n".join(lines) + "\n\n" + "\n\n".join(f"*{n}*" for n in result.notes)
 

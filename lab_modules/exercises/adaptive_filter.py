@@ -317,7 +317,7 @@ class AdaptiveFilter(Exercise):
     def open_loops(self, values: dict) -> dict:
         """The PID position loop at the centre operating point, on the chosen feedback."""
         setup_ = setup(values)
-        return {f"PID on the {setup_.feedback} position": loop_at_plant_input(setup_)}
+        return {f"PID on {setup_.feedback}": loop_at_plant_input(setup_)}
 
     def analyse(self, values: dict):
         trace, status = run(values)

@@ -291,8 +291,8 @@ class EkfDisturbance(Exercise):
 
     def open_loops(self, values: dict) -> dict:
         """The PID loop linearised at the centre (x = 0), the EKF at its steady state there."""
-        feedforward = " + force feedforward" if values["feedforward"] == "on" else ""
-        return {f"PID on the {values['feedback']} position{feedforward}": loop_at_plant_input(setup(values))}
+        feedforward = " + feedforward" if values["feedforward"] == "on" else ""
+        return {f"PID, {values['feedback']} x{feedforward}": loop_at_plant_input(setup(values))}
 
     def analyse(self, values: dict) -> Analysis:
         step, sweep = force_step(values), gap_sweep(values)

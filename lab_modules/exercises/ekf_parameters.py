@@ -183,7 +183,7 @@ class EkfParameters(Exercise):
 
     def open_loops(self, values: dict) -> dict:
         """The PID loop linearised at the operating point x_0, the EKF at its converged estimates."""
-        return {f"PID on the {values['feedback']} position": loop_at_plant_input(
+        return {f"PID, {values['feedback']} x": loop_at_plant_input(
             setup(values), values["reference_offset_um"] * 1e-6)}
 
     def analyse(self, values: dict) -> Analysis:

@@ -216,8 +216,7 @@ class MaglevTracking(Exercise):
 
     def open_loops(self, values: dict) -> dict:
         """The running controller, linearised at the equilibrium at 14.8 mm."""
-        name = ("lead-lag on the measured gap" if values["controller"] == "lead-lag"
-                else f"feedback linearisation on the {values['filter']} EKF")
+        name = "lead-lag" if values["controller"] == "lead-lag" else "linearising control + EKF"
         return {name: loop_at_plant_input(setup(values))}
 
     def analyse(self, values: dict) -> Analysis:

@@ -253,7 +253,7 @@ class MaglevTuning(Exercise):
     def open_loops(self, values: dict) -> dict:
         """The loop the shipped recording ran in: the lab's lead-lag at 14.8 mm (the filter
         only watches).  An uploaded recording's controller is not known: the same loop is shown."""
-        return {"lead-lag of the recorded run": loop_at_plant_input(MaglevSetup(controller="lead-lag"))}
+        return {"recorded lead-lag": loop_at_plant_input(MaglevSetup(controller="lead-lag"))}
 
     def analyse(self, values: dict) -> Analysis:
         rec = recording(values)

@@ -380,7 +380,7 @@ class SensorPlacement(Exercise):
         }
 
     def open_loops(self, values: dict) -> dict:
-        return {f"bearing loop, PID on the {values['feedback']} position": loop_at_plant_input(values)}
+        return {f"bearing PID, {values['feedback']} x": loop_at_plant_input(values)}
 
     def analyse(self, values: dict) -> Analysis:
         n = int(values["modes"])

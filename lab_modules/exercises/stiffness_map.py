@@ -447,7 +447,7 @@ class StiffnessMap(Exercise):
     def open_loops(self, values: dict) -> dict:
         """The PID that holds the rotor at the centre (on the FBFNN filter's estimate), k_Magnet before its step."""
         setup_ = loop_setup(values, networks(values))
-        return {f"PID on the {setup_.feedback} position": loop_at_plant_input(setup_)}
+        return {f"PID on {setup_.feedback}": loop_at_plant_input(setup_)}
 
     def analyse(self, values: dict):
         ki, ks_mm = identified_tables(values)

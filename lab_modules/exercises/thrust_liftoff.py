@@ -268,7 +268,7 @@ class ThrustLiftoff(Exercise):
 
     def open_loops(self, values: dict) -> dict:
         """The lift-off loop on the linear plant (eq. 5), broken at the current command."""
-        return {f"PID on the {values['feedback']} position": loop_at_plant_input(setup(values))}
+        return {f"PID, {values['feedback']} x": loop_at_plant_input(setup(values))}
 
     def analyse(self, values: dict) -> Analysis:
         """Linear figures (poles, Lyapunov noise), the filter's gain history and the noise-free lift-offs."""
