@@ -26,10 +26,14 @@ def margin_view(exercise: Exercise, values: dict) -> tuple[list, list[Plot], lis
     loops = exercise.open_loops(values)
     if not loops:
         return [], [], ([exercise.no_feedback_loop] if exercise.no_feedback_loop else [])
-    omega = analysis.frequency_grid(next(iter(loops.values())), points=400)
+    found = {name: analysis.loop_margins(loop, analysis.frequency_grid(loop, points=MARGIN_GRID_POINTS))
+             for name, loop in loops.items()}
+    # the plots' grid, plus each loop's |S| peak and crossover: a narrow resonance peak is drawn at its height
+    extra = [w for m in found.values() for w in (m.sensitivity_peak_rad_s, m.gain_crossover_rad_s) if np.isfinite(w)]
+    omega = np.unique(np.concatenate([analysis.frequency_grid(next(iter(loops.values())), points=400), extra]))
     readouts, magnitude, phase, sens, notes = [], [], [], [], []
     for (name, loop), color in zip(loops.items(), COLORS):
-        m = analysis.loop_margins(loop, analysis.frequency_grid(loop, points=MARGIN_GRID_POINTS))
+        m = found[name]
         L = analysis.open_loop_response(loop, omega)
         readouts += _margin_readouts(name, m)
         if not np.isfinite(m.gain_margin):
@@ -56,7 +60,7 @@ def margin_view(exercise: Exercise, values: dict) -> tuple[list, list[Plot], lis
 
 
 def _decibels(factor: float) -> float:
-    return 20.0 * np.log10(factor) if factor > 0 else -np.inf
+    return float(20.0 * np.log10(factor)) if factor > 0 else -np.inf
 
 
 def _margin_readouts(name: str, m: analysis.Margins) -> list[tuple[str, float, str]]:
