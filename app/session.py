@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import viser
 
-from app import layout, margins, scope, worksheets
+from app import layout, margins, pole_map, scope, worksheets
 from app.access import token_matches
 from app.store import Store, StoreError
 from app.traffic import callback
@@ -48,7 +48,6 @@ SCOPE_BUCKETS = 75                # per chart and frame: the extremes of the rou
                                   # time buckets, i.e. <= 150 points across the ~500 px plot (see _scope_rows)
 ROUGHNESS_ROWS = 200              # newest rows that decide which series is the roughest
 SCOPE_ROWS = 20_000               # most samples the scope keeps
-POLE_COLORS = ("#7f7f7f", "#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e")
 CONTROL_WIDTH_PX = 380            # the docked controls (left)
 PANEL_WIDTH_PX = 600              # the docked charts (right); of 1366 px, 386 stay for the 3D view and the
                                   # notifications (which open there and would otherwise cover the panel's tabs)
@@ -62,7 +61,6 @@ NUMBER_BOX_HINT = ("*Number boxes: type a decimal point (1.5, not 1,5); a value 
                    "set to the nearest end; an emptied box keeps the value in use.*")
 PANEL_TABS = (("Scope", viser.Icon.WAVE_SINE), ("Pole map", viser.Icon.CHART_DOTS),
               ("Analysis", viser.Icon.CHART_LINE), ("Worksheet", viser.Icon.NOTEBOOK))
-LIGHT_DAMPING = 0.3               # poles below this damping always belong to the dominant view
 AUTOSAVE_AFTER_S = 1.0            # a tab's autosave is written this long after its last change
 TOKEN_ATTEMPTS = 5                # wrong class tokens before a tab is disconnected
 TOKEN_RETRY_S = 1.0               # a wrong token waits this long before the next try
@@ -269,7 +267,7 @@ class LabSession:
             self.columns = {name: 1 + i for i, name in enumerate(simulation.columns)}
             self.buffer = np.empty((0, 1 + len(self.columns)))
         self.recording = recording
-        self.shown_poles: dict[str, np.ndarray] | None = None
+        self.shown_poles: pole_map.PoleView | None = None
         self.shown_analysis: Analysis | None = None   # the last analysis shown, redrawn with fresh scope readouts
         self.scene = exercise.scene(self.values)
         self._build_gui()
@@ -454,12 +452,14 @@ class LabSession:
             self.charts = [self._add_chart(chart) for chart in self.exercise.charts]
             self.readouts = gui.add_markdown("*computing …*")
         with self.tabs["Pole map"]:
-            dominant, full = _pole_charts(first.poles)
-            self.pole_plots = tuple(gui.add_uplot(data, **options, aspect=1.6) for data, options in (dominant, full))
+            self.shown_poles = pole_map.view(self.exercise, dict(self.values), first.poles)
+            self.pole_plots = tuple(gui.add_uplot(data, **options, aspect=1.6)
+                                    for data, options in pole_map.charts(self.shown_poles))
+            gui.add_markdown(pole_map.legend_markdown())
             gui.add_markdown("Poles in the s-plane (discrete poles mapped by s = ln z / T); the dashed line is "
                              "the imaginary axis, right of it is unstable. The first map leaves out the fast, "
                              "well-damped poles (sensor lag, amplifier) that squash the second.")
-            self.pole_table = gui.add_markdown("")
+            self.pole_table = gui.add_markdown(pole_map.table_markdown(first.poles))
         with self.tabs["Analysis"]:
             self.plots = []
             for plot in first.plots:
@@ -643,14 +643,21 @@ class LabSession:
             self.shown_analysis = result
             self.readouts.content = self._readouts_markdown(result)
             self.client.flush()                       # the readouts go out now, not with the next window
-            if not _same_poles(result.poles, self.shown_poles):
-                self.shown_poles = result.poles
-                for handle, (data, options) in zip(self.pole_plots, _pole_charts(result.poles)):
-                    handle.data, handle.scales, handle.title = data, options["scales"], options["title"]
-                self.pole_table.content = _pole_table(result.poles)
             for handle, plot in zip(self.plots, result.plots):
                 data, options = _plot_chart(plot)
                 handle.data, handle.scales = data, options["scales"]
+            exercise, values = self.exercise, dict(self.values)
+        poles = pole_map.view(exercise, values, result.poles)   # the root locus: cached per setting
+        with self.gui_lock:
+            if not self._current(generation):
+                return False
+            if not poles.same_as(self.shown_poles):
+                self.shown_poles = poles
+                with self.client.atomic():            # series, axes and data change together
+                    for handle, (data, options) in zip(self.pole_plots, pole_map.charts(poles)):
+                        handle.series, handle.axes, handle.data = options["series"], options["axes"], data
+                        handle.scales, handle.title = options["scales"], options["title"]
+                    self.pole_table.content = pole_map.table_markdown(result.poles)
         return True
 
     def _readouts_markdown(self, result: Analysis) -> str:
@@ -865,72 +872,6 @@ def _plot_chart(plot: Plot) -> tuple[tuple, dict]:
         "axes": (viser.uplot.Axis(label=plot.x_label), viser.uplot.Axis(label=plot.y_label)),
         "scales": {"x": viser.uplot.Scale(time=False, **(LOG_SCALE if plot.log_x else {})),
                    "y": viser.uplot.Scale(auto=False, **(LOG_SCALE | _log_span(*ys) if plot.log_y else _span(*ys)))}}
-
-
-def dominant_decay_rad_s(poles: dict[str, np.ndarray]) -> float:
-    """Decay rate |Re s| up to which a pole counts as dominant: twice the median
-    decay rate, which leaves out the sensor-lag and amplifier poles (thousands
-    of rad/s) that squash the real axis, but keeps the rotor, controller and
-    filter poles around them."""
-    decay = np.abs(np.concatenate([np.asarray(p, dtype=complex) for p in poles.values()] or [np.zeros(0)]).real)
-    return 2.0 * float(np.median(decay)) if decay.size else np.inf
-
-
-def _pole_charts(poles: dict[str, np.ndarray]) -> tuple[tuple[tuple, dict], tuple[tuple, dict]]:
-    """uPlot arguments of the two pole maps: the dominant poles (slow, or lightly
-    damped: |Re s| below ``dominant_decay_rad_s`` or damping below
-    ``LIGHT_DAMPING``) and all poles."""
-    limit = dominant_decay_rad_s(poles)
-
-    def dominant(p: np.ndarray) -> np.ndarray:
-        damping = -p.real / np.maximum(np.abs(p), 1e-300)
-        return p[(np.abs(p.real) <= limit) | (damping < LIGHT_DAMPING)]
-
-    chosen = {name: dominant(np.asarray(p, dtype=complex)) for name, p in poles.items()}
-    return (_pole_map(chosen, f"Dominant poles (Re s > −{limit:.0f} rad/s or damping ζ < {LIGHT_DAMPING})"),
-            _pole_map(poles, "All poles"))
-
-
-def _pole_map(poles: dict[str, np.ndarray], title: str) -> tuple[tuple, dict]:
-    """A pole map as a scatter plot over one shared, sorted real axis (each pole
-    set a series with gaps where the others have their poles), with the
-    imaginary axis drawn as a dashed line between two extra rows at Re s = 0."""
-    points = sorted((p.real, p.imag, index) for index, ps in enumerate(poles.values()) for p in ps)
-    imag = np.array([p[1] for p in points])
-    reach = float(np.abs(imag).max()) if imag.size else 0.0
-    if reach == 0.0:                                  # all poles real: a square-ish view of the real axis
-        reach = 0.5 * max((abs(p[0]) for p in points), default=1.0) or 1.0
-    reach *= 1.1
-    points += [(0.0, -reach, -1), (0.0, reach, -1)]
-    points.sort(key=lambda p: p[0])
-    x = np.array([p[0] for p in points])
-    columns = [np.full(len(x), np.nan) for _ in range(len(poles) + 1)]
-    for row, (_, value, which) in enumerate(points):
-        columns[which][row] = value                   # which = -1: the imaginary axis, the last column
-    series = (viser.uplot.Series(label="Re s [rad/s]"),) + tuple(
-        viser.uplot.Series(label=name, stroke=color, width=0,
-                           points=viser.uplot.Series_Points(show=True, size=8, fill=color, stroke=color))
-        for name, color in zip(poles, itertools.cycle(POLE_COLORS))) + (
-        viser.uplot.Series(label="Re s = 0", stroke="#000000", width=1, dash=(6.0, 4.0),
-                           points=viser.uplot.Series_Points(show=False)),)
-    return (x, *columns), {
-        "series": series, "title": title, "legend": viser.uplot.Legend(live=False), "padding": scope.PADDING,
-        "axes": (viser.uplot.Axis(label="Re s [rad/s]"), viser.uplot.Axis(label="Im s [rad/s]")),
-        "scales": {"x": viser.uplot.Scale(time=False),
-                   "y": viser.uplot.Scale(auto=False, min=-1.05 * reach, max=1.05 * reach)}}
-
-
-def _same_poles(a: dict[str, np.ndarray], b: dict[str, np.ndarray] | None) -> bool:
-    return b is not None and a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)
-
-
-def _pole_table(poles: dict[str, np.ndarray]) -> str:
-    rows = ["| set | Re s [rad/s] | Im s [rad/s] | damping ζ |", "|---|---:|---:|---:|"]
-    for name, set_poles in poles.items():
-        for pole in sorted((p for p in set_poles if p.imag >= 0), key=lambda p: -p.real):
-            zeta = -pole.real / abs(pole) if abs(pole) > 0 else 1.0
-            rows.append(f"| {name} | {pole.real:.0f} | {pole.imag:.0f} | {zeta:.2f} |")
-    return "\n".join(rows)
 
 
 def _log_span(*arrays: np.ndarray) -> dict[str, float]:

@@ -106,6 +106,9 @@ class Exercise:
     #: Why the exercise has no feedback loop to grade (then ``open_loops`` stays empty); every
     #: exercise either declares its loops or says here why it has none (tested).
     no_feedback_loop: str = ""
+    #: (parameter, pole set): a common gain factor and the closed-loop set of ``Analysis.poles`` it
+    #: moves; the pole map draws that set's paths as the factor sweeps its range (root locus)
+    locus: tuple[str, str] | None = None
 
     def resolve(self, overrides: dict | None = None) -> dict:
         overrides = dict(overrides or {})
@@ -129,6 +132,12 @@ class Exercise:
         return self.simulation(values)
 
     def metrics(self, values: dict, duration_s: float) -> dict:
+        raise NotImplementedError
+
+    def locus_matrices(self, values: dict, factors: tuple[float, ...]) -> tuple[list[np.ndarray], float | None]:
+        """For ``locus``: the state matrices of that closed loop with the parameter at each of
+        ``factors`` (the others as in ``values``) and their sample time [s] (None: continuous).
+        They must be affine in the factor (it scales the controller's output)."""
         raise NotImplementedError
 
     def open_loops(self, values: dict) -> dict:
