@@ -184,3 +184,40 @@ def test_broken_loops_close_to_the_exercises_own_loops():
         m = analysis.loop_margins(loop, analysis.frequency_grid(loop, points=MARGIN_GRID_POINTS))
         edge = m.gain_margin if m.stable else m.gain_margin_down
         assert values["gain_factor"] * edge == pytest.approx(largest, abs=0.006)
+
+
+def test_analysis_charts_follow_plots_that_change_between_results():
+    """A later analysis result may hold other plots than the first (stiffness_map yields 4, then 8,
+    and the margin plots follow them): each chart takes its plot's series and title, not only the
+    data, and missing charts are added (before, the margin charts drew other plots' data)."""
+    import contextlib
+
+    from app.session import LabSession, _plot_shape
+    from lab_modules.exercises import Plot
+
+    class Handle:
+        def __init__(self, data, **options):
+            self.data, self.removed = data, False
+            self.title, self.series = options["title"], options["series"]
+
+        def remove(self):
+            self.removed = True
+
+    class Stub:
+        def __init__(self):
+            self.plots, self.plot_shapes = [], []
+            self.tabs = {"Analysis": contextlib.nullcontext()}
+            self.client = type("Client", (), {"gui": type("Gui", (), {"add_uplot": staticmethod(
+                lambda data, **options: Handle(data, **options))})(), "atomic": contextlib.nullcontext})()
+
+    def plot(title: str) -> Plot:
+        return Plot(title, "x [1]", "y [1]", np.arange(3.0), ((title, np.ones(3), "#000000"),))
+    stub = Stub()
+    LabSession._update_plots(stub, [plot("a"), plot("margin")])
+    LabSession._update_plots(stub, [plot("a"), plot("b"), plot("margin")])
+    assert [h.title for h in stub.plots] == ["a", "b", "margin"]
+    assert stub.plot_shapes == [_plot_shape(plot(t)) for t in ("a", "b", "margin")]
+    assert [s["label"] for s in stub.plots[1].series[1:]] == ["b"]
+    removed = stub.plots[2]
+    LabSession._update_plots(stub, [plot("a"), plot("b")])
+    assert removed.removed and len(stub.plots) == 2
