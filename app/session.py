@@ -29,6 +29,8 @@ import viser
 
 from app import layout, margins, pole_map, scope, worksheets
 from app.access import token_matches
+from app.actions import ActionPanel
+from app.live import LivePlots, SpeedMeter
 from app.store import Store, StoreError
 from app.traffic import callback
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, registry
@@ -394,6 +396,8 @@ class LabSession:
         self.status = gui.add_markdown("**Running**")
         buttons = gui.add_button_group("Simulation", ("Run", "Pause", "Reset"))
         buttons.on_click(self._on("buttons", lambda: self._on_button(buttons.value)))
+        self.speed, self.speed_meter = gui.add_markdown(""), SpeedMeter()   # filled in while it runs
+        self.action_panel = ActionPanel(self, gui, _plot_chart)   # the exercise's buttons, if any
         if self.scene is not None:
             refresh = gui.add_dropdown("3D view", tuple(SCENE_REFRESH), initial_value=self.scene_refresh,
                                        hint="How often the 3D view follows the simulation. Smooth motion needs "
@@ -448,6 +452,7 @@ class LabSession:
         beside = self.beside
         with self.tabs["Scope"]:
             self.window_ms = self._window_rows() * self.simulation.sample_time_s * 1e3
+            self.live = LivePlots(gui, self.exercise, self.simulation)   # if the exercise has any
             self.y_ranges = [scope.StickyRange() for _ in self.exercise.charts]
             self.charts = [self._add_chart(chart) for chart in self.exercise.charts]
             self.readouts = gui.add_markdown("*computing …*")
@@ -550,7 +555,10 @@ class LabSession:
             if parameter.name == "seed" or self.simulation.status_message():
                 self._reset()                         # a stopped run is not carried on (it touched down)
             else:
+                step_s = self.simulation.sample_time_s
                 self.simulation = self.exercise.retune(self.simulation, self.values)
+                if self.simulation.sample_time_s != step_s:
+                    self.buffer = self.buffer[:0]     # the scope's rows assume one sample time
         if self.scene is not None:
             try:
                 self.scene.update(dict(self.values))
@@ -590,6 +598,8 @@ class LabSession:
                 self._start_simulation_thread()       # never left without a simulation
             self.problems.clear()
             self.status.content = "**Running**" if self.running else "**Paused**"
+            if not self.running:
+                self.speed.content = ""
 
     def _reset(self) -> None:
         self.simulation = self.exercise.simulation(self.values)
@@ -715,7 +725,6 @@ class LabSession:
     def _run(self, generation: int) -> None:
         """The simulation thread: an error in one frame is reported and the next frame goes on."""
         carry, last, next_scene, next_readouts = 0.0, time.perf_counter(), 0.0, 0.0
-        T = self.simulation.sample_time_s
         next_frame = last
         while self._current(generation):
             next_frame += FRAME_S                     # a steady frame rate: the frame's own work is not added
@@ -729,12 +738,12 @@ class LabSession:
             now = time.perf_counter()
             elapsed, last = now - last, now
             try:
-                carry, next_scene, next_readouts = self._frame(generation, now, elapsed, T, carry,
+                carry, next_scene, next_readouts = self._frame(generation, now, elapsed, carry,
                                                                next_scene, next_readouts)
             except Exception as error:  # noqa: BLE001 - reported; the next frame goes on
                 self._problem("simulation", error)
 
-    def _frame(self, generation: int, now: float, elapsed: float, T: float, carry: float,
+    def _frame(self, generation: int, now: float, elapsed: float, carry: float,
                next_scene: float, next_readouts: float) -> tuple[float, float, float]:
         """One display frame: advance, draw, 3D view; returns the carried state."""
         period = SCENE_REFRESH[self.scene_refresh]
@@ -750,9 +759,11 @@ class LabSession:
             if not self.running:
                 return carry, next_scene, next_readouts
             time_scale = self.values.get("time_scale", 1.0)
-            carry += time_scale * elapsed / T
+            carry += time_scale * elapsed / self.simulation.sample_time_s   # a retune may change it
             steps, carry = int(carry), carry - int(carry)
+            started = time.thread_time()
             trace = self.simulation.advance(steps)
+            self.speed_meter.add(steps * self.simulation.sample_time_s, time.thread_time() - started, elapsed)
             window = self._window_rows()
             self.buffer = np.concatenate([self.buffer, trace])[-window:]
             message = self.simulation.status_message()
@@ -763,8 +774,10 @@ class LabSession:
             if not self._current(generation):
                 return carry, next_scene, next_readouts
             self._draw()
+            self.live.draw(self.simulation, now, getattr(self, "drawn_until", None))
             if now >= next_readouts:
                 self._refresh_live_readouts()
+                self.speed.content = self.speed_meter.text()
                 next_readouts = now + LIVE_READOUT_PERIOD_S
             if message and self.simulation is stopped and not self.running:   # not reset meanwhile
                 self.status.content = f"**Stopped: {message}** Press Run or Reset to start again."

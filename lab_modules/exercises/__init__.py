@@ -48,6 +48,7 @@ class Plot:
     points: bool = False                              # markers only (scatter)
     log_x: bool = False                               # logarithmic axes (positive values only)
     log_y: bool = False
+    shade: tuple[tuple[float, float], ...] = ()       # x intervals shaded in live plots (e.g. fit windows)
 
 
 @dataclass
@@ -58,6 +59,20 @@ class Analysis:
     poles: dict[str, np.ndarray]                      # name -> continuous-equivalent poles [rad/s]
     notes: list[str] = field(default_factory=list)
     plots: list[Plot] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class Action:
+    """A button of an exercise that runs a longer computation on demand (a Monte-Carlo run ...).
+
+    ``method`` names an exercise method taking the parameter ``values``: it returns an
+    ``Analysis`` or yields several (progress first, the result last; ``poles`` are not
+    shown).  The app runs it in the background: the tab stays live, a second press
+    starts it afresh, an exercise switch stops it at its next yield."""
+
+    label: str                                        # the button's text
+    method: str
+    hint: str = ""
 
 
 class Simulation(Protocol):
@@ -106,6 +121,7 @@ class Exercise:
     #: Why the exercise has no feedback loop to grade (then ``open_loops`` stays empty); every
     #: exercise either declares its loops or says here why it has none (tested).
     no_feedback_loop: str = ""
+    actions: tuple[Action, ...] = ()      # buttons that run a method in the background (see ``Action``)
     #: (parameter, pole set): a common gain factor and the closed-loop set of ``Analysis.poles`` it
     #: moves; the pole map draws that set's paths as the factor sweeps its range (root locus)
     locus: tuple[str, str] | None = None
@@ -147,6 +163,12 @@ class Exercise:
 
     def live_readouts(self, trace: dict[str, np.ndarray]) -> list[tuple[str, float, str]]:
         """Readouts from the scope's buffer (column name -> samples)."""
+        return []
+
+    def live_plots(self, simulation: Simulation) -> list[Plot]:
+        """Plots of the running simulation's newest state (e.g. the raw samples of its last
+        periods), redrawn by the app a few times a second beside the scope; keep each to a
+        few thousand points.  Their number and series must not change during a run."""
         return []
 
     def scene(self, values: dict) -> SceneView | None:
