@@ -87,7 +87,7 @@ class _FrameThread:
 
 
 class FrameClock:
-    """The process's frame threads (started on first use)."""
+    """The process's frame threads (all started on first use)."""
 
     def __init__(self, threads: int = FRAME_THREADS, period_s: float = FRAME_S):
         self.count, self.period_s = threads, period_s
@@ -98,8 +98,8 @@ class FrameClock:
         """Call ``step(now)`` every frame until it returns False; on the least busy thread."""
         ticker = Ticker(step, name)
         with self.lock:
-            if len(self.threads) < self.count:
-                self.threads.append(_FrameThread(len(self.threads), self.period_s))
+            if not self.threads:                      # all at once: the thread count stays put from here on
+                self.threads = [_FrameThread(index, self.period_s) for index in range(self.count)]
             thread = min(self.threads, key=lambda t: len(t.tickers))
         thread.add(ticker)
         return ticker

@@ -63,6 +63,7 @@ NUMBER_BOX_HINT = ("*Number boxes: type a decimal point (1.5, not 1,5); a value 
 PANEL_TABS = (("Scope", viser.Icon.WAVE_SINE), ("Pole map", viser.Icon.CHART_DOTS),
               ("Analysis", viser.Icon.CHART_LINE), ("Worksheet", viser.Icon.NOTEBOOK))
 AUTOSAVE_AFTER_S = 1.0            # a tab's autosave is written this long after its last change
+FRAME_LOCK_WAIT_S = 0.005         # a frame waits this long for its tab's locks, then skips (frames.py)
 BROWSER_KEY = "autosave"          # the browser's localStorage keeps its newest autosave code under this key
 BROWSER_WAIT_S = 1.0              # a new tab waits at most this long for the browser's answer
 TOKEN_ATTEMPTS = 5                # wrong class tokens before a tab is disconnected
@@ -791,12 +792,13 @@ class LabSession:
                next_scene: float, next_readouts: float) -> tuple[float, float, float]:
         """One display frame: advance, draw, 3D view; returns the carried state.
 
-        Runs on a frame thread shared with other tabs, so it never waits for this tab's
-        locks: while the worker holds them (an exercise being built, a retune), the frame
-        is skipped and the next one catches up (the simulated time is carried)."""
+        Runs on a frame thread shared with other tabs, so it waits at most
+        ``FRAME_LOCK_WAIT_S`` for this tab's locks: while the worker or the analysis holds
+        them longer (an exercise being built, a retune), the frame is skipped and the next
+        one catches up (the simulated time is carried)."""
         period = SCENE_REFRESH[self.scene_refresh]
         if self.scene is not None and period is not None and now >= max(next_scene, self.scene_quiet_until) \
-                and self.gui_lock.acquire(blocking=False):
+                and self.gui_lock.acquire(timeout=FRAME_LOCK_WAIT_S):
             try:                                  # the scene belongs to this generation only
                 next_scene = now + period
                 if self._current(generation):
@@ -808,7 +810,7 @@ class LabSession:
                 self.gui_lock.release()
         if self.running:                          # the simulation's own step: a retune may change it
             carry += self.values.get("time_scale", 1.0) * elapsed / self.simulation.sample_time_s
-        if not self.lock.acquire(blocking=False):
+        if not self.lock.acquire(timeout=FRAME_LOCK_WAIT_S):
             return carry, next_scene, next_readouts
         try:
             if not self.running:
@@ -825,7 +827,7 @@ class LabSession:
                 self.stop_shown = (message, self.simulation)
         finally:
             self.lock.release()
-        if not self.gui_lock.acquire(blocking=False):
+        if not self.gui_lock.acquire(timeout=FRAME_LOCK_WAIT_S):
             return carry, next_scene, next_readouts
         try:
             if not self._current(generation):
