@@ -13,11 +13,12 @@ import scipy.linalg
 from app import pole_map
 from lab_modules import analysis
 from lab_modules.exercises import Analysis, get, registry
-from lab_modules.exercises.ekf_parameters import linear_axis
+from lab_modules.exercises.ekf_parameters import linear_axis, linear_poles
 
 EXERCISES = tuple(registry())
 #: the exercises with a common gain factor and the pole set it moves
 LOCI = {"kalman_noise": ("gain_factor", "closed loop"), "sensor_placement": ("gain_factor", "closed loop"),
+        "ekf_disturbance": ("pid_gain", "closed loop (linearised at x = 0, PID on x̂, v̂, î)"),
         "ekf_parameters": ("pid_gain", "closed loop (linear, rated k_i, k_x)"),
         "lqg_vs_pid": ("pid_gain", "PID loop with filter")}
 
@@ -117,6 +118,17 @@ def test_ekf_parameters_shows_closed_loop_and_filter_error(defaults):
     expected = analysis.z_to_s(np.linalg.eigvals(A - A @ K @ C), axis.model.dt)
     got = poles["filter error (x, v, i at rated k_i, k_x)"]
     assert np.max(np.abs(np.sort_complex(got) - np.sort_complex(expected))) < 1e-6 * np.max(np.abs(expected))
+
+
+def test_ekf_disturbance_shows_closed_loop_and_filter_error(defaults):
+    """The linearised closed loop (stable at the defaults, the same as ekf_parameters' linear loop
+    on the same sliders) beside the EKF's filter error poles."""
+    _, values, poles = defaults["ekf_disturbance"]
+    assert {pole_map.category(name).name for name in poles} == {"plant", "closed loop", "filter error"}
+    closed = poles[LOCI["ekf_disturbance"][1]]
+    assert np.all(closed.real < 0)
+    expected = linear_poles(linear_axis(values))["closed loop (linear, rated k_i, k_x)"]
+    assert np.max(np.abs(np.sort_complex(closed) - np.sort_complex(expected))) < 1e-9 * np.max(np.abs(expected))
 
 
 def test_modes_number_every_real_pole_and_pair_with_frequency_and_damping():
