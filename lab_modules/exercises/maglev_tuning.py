@@ -29,6 +29,7 @@ import scipy.stats
 from lab_modules import recordings
 from lab_modules.claims import Claim
 from lab_modules.estimators.continuous_discrete_ekf import OBSERVER_COLUMNS, run_observer
+from lab_modules.estimators.kalman import correction
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
 from lab_modules.loops.maglev_loop import preset_q
 from lab_modules.parameters import Parameter, ParameterError
@@ -135,14 +136,16 @@ def observe(rec: recordings.Recording, values: dict) -> dict[str, np.ndarray]:
     P0 = values["initial_covariance"] * np.eye(3)
     Q = filter_q(values)
     out = np.full((len(rec), len(OBSERVER_COLUMNS)), np.nan)
+    priors = np.full((len(rec), 12), np.nan)
     rows = run_observer(rec.time_s, rec.measured_m, rec.coil_voltage_v, x, P0, Q,
-                        sigma**2, TABLE_3_1.constants(), 1, out)
+                        sigma**2, TABLE_3_1.constants(), 1, out, priors)
     columns = {name: out[:, i] for i, name in enumerate(OBSERVER_COLUMNS)}
     columns.update(time_s=rec.time_s, reference_m=rec.reference_m, x_measured_m=rec.measured_m,
                    coil_voltage_v=rec.coil_voltage_v, zero=np.zeros(len(rec)),
                    filter_sensor_noise_m=np.full(len(rec), sigma))
     columns["rows"] = np.array(rows)
     columns["Q"] = Q
+    columns["priors"] = priors          # x⁻ and P⁻ before each sample's correction (filter inspector)
     return columns
 
 
@@ -358,12 +361,33 @@ class Replay:
         self.table = np.column_stack([observed["time_s"][:rows]] + [observed[c][:rows] for c in self.columns])
         self.diverged = rows < observed["time_s"].size
         self.sample_time_s = float(np.median(np.diff(observed["time_s"])))
+        self.priors = observed["priors"][:rows]
+        self.measured_m = observed["x_measured_m"][:rows]
+        self.r = float(observed["filter_sensor_noise_m"][0]) ** 2
         self.position = 0
+        self.stepped = False
 
     def advance(self, n_steps: int) -> np.ndarray:
         chunk = self.table[self.position:self.position + max(n_steps, 0)]
         self.position += chunk.shape[0]
+        self.stepped = n_steps == 1 and chunk.shape[0] == 1
         return chunk
+
+    def filter_state(self) -> dict | None:
+        """The continuous-discrete EKF (eq. 2.40-2.42, H = [1 0 0]) at the sample of the last
+        advance(1), redone from the prior the observer kept: corrected x̂ and P, gain K,
+        innovation and √S (like ``MaglevSimulation.filter_state``)."""
+        if not self.stepped:
+            return None
+        k = self.position - 1
+        x_prior, P_prior = self.priors[k, :3], self.priors[k, 3:].reshape(3, 3)
+        step = correction(x_prior, P_prior, [[1.0, 0.0, 0.0]], [self.r], [self.measured_m[k]])
+        return {"title": "continuous-discrete EKF replaying the recording (paper 004 §3.5)",
+                "time_s": float(self.table[k, 0]),
+                "states": (("air gap x₁", "m"), ("ball velocity x₂", "m/s"), ("coil current x₃", "A")),
+                "measurements": (("position sensor", "m"),),
+                "x": step["x"], "P": step["P"], "K": step["K"], "innovation": step["innovation"],
+                "innovation_sigma": np.sqrt(np.diag(step["S"]))}
 
     def status_message(self) -> str:
         if self.position < self.table.shape[0]:
