@@ -461,7 +461,7 @@ class LabSession:
             gui.add_markdown("Poles in the s-plane (discrete poles mapped by s = ln z / T); the dashed line is "
                              "the imaginary axis, right of it is unstable. The first map leaves out the fast, "
                              "well-damped poles (sensor lag, amplifier) that squash the second.")
-            self.pole_table = gui.add_markdown(pole_map.table_markdown(first.poles))
+            self.pole_table = gui.add_markdown(pole_map.table_markdown(self.shown_poles))
         with self.tabs["Analysis"]:
             self.plots = []
             for plot in first.plots:
@@ -666,7 +666,7 @@ class LabSession:
                     for handle, (data, options) in zip(self.pole_plots, pole_map.charts(poles)):
                         handle.series, handle.axes, handle.data = options["series"], options["axes"], data
                         handle.scales, handle.title = options["scales"], options["title"]
-                    self.pole_table.content = pole_map.table_markdown(result.poles)
+                    self.pole_table.content = pole_map.table_markdown(poles)
         return True
 
     def _add_plots(self, plots: list[Plot]) -> None:

@@ -161,6 +161,13 @@ class Exercise:
         They must be affine in the factor (it scales the controller's output)."""
         raise NotImplementedError
 
+    def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
+        """Physical names of the poles of ``Analysis.poles`` (``poles``, as ``analyse`` returned
+        them), by set: one name or None per pole in the set's order, a conjugate pair both
+        named alike; the pole map's table shows them instead of the generic kind.  Default:
+        no names."""
+        return {}
+
     def open_loops(self, values: dict) -> dict:
         """Feedback loops broken at the plant input, by name -> open loop L (``control`` LTI
         system, S = 1 / (1 + L)); the app draws their Bode plots, margins and |S|max."""

@@ -48,7 +48,7 @@ from lab_modules import analysis
 from lab_modules.claims import Claim
 from lab_modules.estimators import extended_kalman as ef
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
-from lab_modules.exercises._common import ekf_loop_fields
+from lab_modules.exercises._common import axis_plant_names, ekf_loop_fields
 from lab_modules.exercises.ekf_parameters import PARAMETERS as EKF_PARAMETERS_EXERCISE_PARAMETERS
 from lab_modules.exercises.ekf_parameters import linear_axis
 from lab_modules.exercises.kalman_noise import PARAMETERS as NOISE_EXERCISE_PARAMETERS
@@ -312,6 +312,10 @@ class EkfDisturbance(Exercise):
                      "fed by a steady-state Kalman filter of x, v, i with the same q_22, q_33 and R; the force "
                      "state f_z and its feedforward are left out.")
         return Analysis(readouts, poles, notes, [fig_4_plot(values, step), *fig_5_plots(values, sweep)])
+
+    def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
+        """The open-loop plant's poles by name (the loops' poles keep their generic kind)."""
+        return {"open-loop plant": axis_plant_names(poles["open-loop plant"])}
 
     def locus_matrices(self, values: dict, factors: tuple[float, ...]) -> tuple[list[np.ndarray], float]:
         """The linearised loop's state matrices (the states in the feedback) at these PID gains K."""

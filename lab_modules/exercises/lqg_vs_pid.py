@@ -53,7 +53,7 @@ from lab_modules.controllers.lqr import (
 )
 from lab_modules.controllers.pid import pid, setpoint_filter
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series, kalman_noise
-from lab_modules.exercises._common import pid_from_values
+from lab_modules.exercises._common import axis_plant_names, pid_from_values
 from lab_modules.loops.radial_axis_experiment import AxisSetup, AxisSimulation
 from lab_modules.loops.radial_axis_loop import OK, TRACE_COLUMNS
 from lab_modules.parameters import Parameter
@@ -698,6 +698,10 @@ class LqgVsPid(Exercise):
                 "regulator_states": ["x [m]", "v [m/s]", "i [A]", "xi = ∫(r - x) dt [m s]"],
                 "A_aug": A_aug.tolist(), "B_aug": B_aug.tolist(),
                 "state_gain_K": list(lqg.state_gain), "integral_gain_K_I_v_per_m_s": lqg.integral_gain_v_per_m_s}
+
+    def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
+        """The open-loop plant's poles by name (the loops' poles keep their generic kind)."""
+        return {"open-loop plant": axis_plant_names(poles["open-loop plant"])}
 
     def locus_matrices(self, values: dict, factors: tuple[float, ...]) -> tuple[list[np.ndarray], float]:
         """The PID loop's state matrices (the states in the feedback) at these PID gains K."""

@@ -30,6 +30,7 @@ from lab_modules.controllers.feedback_linearisation import (
 )
 from lab_modules.controllers.lead_lag import LEAD_LAG
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises._common import MAGLEV_LAGS, magnet_plant_names
 from lab_modules.loops.maglev_loop import (
     CONTROLLERS,
     FILTERS,
@@ -252,6 +253,11 @@ class MaglevTracking(Exercise):
         notes = [(f"Singularity guard: estimates with x̂1 < 1 mm or x̂3 < {GUARD_CURRENT_A * 1e3:.0f} mA are "
                  "clamped before eq. 2.23; the voltage grows as 1/x̂3 towards that edge.")]
         return Analysis(readouts, poles, notes, plots)
+
+    def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
+        """The linearised plant's poles by name (the loops' poles keep their generic kind)."""
+        name = "open-loop plant (linearised, 14.8 mm)"
+        return {name: magnet_plant_names(poles[name], TABLE_3_1.linear_model().A, "ball", MAGLEV_LAGS)}
 
     def simulation(self, values: dict) -> MaglevSimulation:
         return MaglevSimulation(setup(values), seed=int(values["seed"]))

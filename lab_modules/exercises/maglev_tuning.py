@@ -31,6 +31,7 @@ from lab_modules.claims import Claim
 from lab_modules.estimators.continuous_discrete_ekf import OBSERVER_COLUMNS, run_observer
 from lab_modules.estimators.kalman import correction
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises._common import MAGLEV_LAGS, magnet_plant_names
 from lab_modules.loops.maglev_loop import preset_q
 from lab_modules.parameters import Parameter, ParameterError
 from lab_modules.plants.maglev_ball import TABLE_3_1
@@ -299,6 +300,13 @@ class MaglevTuning(Exercise):
         if rows < len(rec):
             notes.append(f"The filter diverged at t = {observed['time_s'][rows]:.3f} s.")
         return Analysis(readouts, linearised_poles(rec, observed), notes, plots)
+
+    def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
+        """The linearised plant's poles by name (at the recording's mean gap, as ``linearised_poles``)."""
+        rec = recording(values)
+        name = "open-loop plant (linearised)"
+        A = TABLE_3_1.linear_model(float(np.mean(rec.measured_m))).A
+        return {name: magnet_plant_names(poles[name], A, "ball", MAGLEV_LAGS)}
 
     def simulation(self, values: dict) -> Replay:
         return Replay(observe(recording(values), values))

@@ -369,6 +369,11 @@ class ThrustLiftoff(Exercise):
         return Plot("Current-command noise vs sensor noise (linear, no limit)", "sensor noise σ_v [µm]",
                     "standard deviation [A]", sigmas_um, tuple(series))
 
+    def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
+        """The open-loop plant's two poles (``analyse`` lists +a, then −a) by name."""
+        return {"open-loop plant": ["collar position (unstable magnet pole)",
+                                    "collar position (stable mirror of the magnet pole)"]}
+
     def simulation(self, values: dict) -> ThrustSimulation:
         s = setup(values)
         return ThrustSimulation(s, seed=int(values["seed"]), explanation=instability_note(s),
