@@ -126,6 +126,9 @@ class Exercise:
     data_description: str | None = None   # set: the exercise accepts an uploaded CSV
     download_label: str | None = None     # set: a button offers ``download(values)`` as a file
     claims: tuple[Claim, ...] = ()        # the paper's headline results, measured by ``metrics``
+    #: Why the exercise has no feedback loop to grade (then ``open_loops`` stays empty); every
+    #: exercise either declares its loops or says here why it has none (tested).
+    no_feedback_loop: str = ""
     actions: tuple[Action, ...] = ()      # buttons that run a method in the background (see ``Action``)
     #: (parameter, pole set): a common gain factor and the closed-loop set of ``Analysis.poles`` it
     #: moves; the pole map draws that set's paths as the factor sweeps its range (root locus)

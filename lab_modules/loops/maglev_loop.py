@@ -23,7 +23,9 @@ from dataclasses import dataclass, field, replace
 import control
 import numba
 import numpy as np
+import scipy.linalg
 
+from lab_modules import analysis
 from lab_modules.controllers.feedback_linearisation import feedback_gain, linearising_control
 from lab_modules.controllers.lead_lag import LEAD_LAG, LeadLag
 from lab_modules.controllers.pid import controller_step
@@ -361,3 +363,69 @@ def record_lead_lag_run(duration_s: float = 6.0, still_s: float = 1.0, sensor_no
 #: visible wandering of the hardware's recording (Fig. 3.25); 1e-8 A^2/s on
 #: the current is eq. 3.4's Q_33.
 RECORDING_PLANT_Q = np.diag([0.0, 2e-4, 1e-8])
+
+
+# -- the loop linearised at the operating point, broken at the plant input (margins, |S|max) -------
+def state_feedback_gain(setup: MaglevSetup) -> np.ndarray:
+    """du/dx_hat of the feedback-linearising control (eq. 2.23, 2.30) at the equilibrium at the
+    reference's base gap (reference at rest): central differences, steps 1e-6 of each state's scale."""
+    p, gap = setup.plant.constants(), setup.reference.base_m
+    x0 = np.array([gap, 0.0, setup.plant.equilibrium_current_a(gap)])
+    reference = np.array([gap, 0.0, 0.0, 0.0])
+    steps = 1e-6 * np.array([gap, 1.0, x0[2]])
+    gain = np.empty(3)
+    for j in range(3):
+        e = np.zeros(3)
+        e[j] = steps[j]
+        gain[j] = (linearising_control(x0 + e, reference, setup.gain, p)[0]
+                   - linearising_control(x0 - e, reference, setup.gain, p)[0]) / (2 * steps[j])
+    return gain
+
+
+def _discrete_noise(F: np.ndarray, Q: np.ndarray, dt: float) -> np.ndarray:
+    """Q_d = integral_0^dt e^{F s} Q e^{F^T s} ds (Van Loan): what eq. 2.45 adds to P over dt."""
+    n = F.shape[0]
+    M = scipy.linalg.expm(np.block([[-F, Q], [np.zeros((n, n)), F.T]]) * dt)
+    Phi = M[n:, n:].T
+    return Phi @ M[:n, n:]
+
+
+def loop_at_plant_input(setup: MaglevSetup) -> control.StateSpace:
+    """Open loop L broken at the coil voltage (S = 1 / (1 + L)), everything linearised at the
+    equilibrium at the reference's base gap (eq. 2.13-2.14), plant (the true one) by a zero-order
+    hold at dt.  The lead-lag acts on the measured gap; feedback linearisation is the state
+    feedback du/dx_hat (``state_feedback_gain``) on the filter's steady state at that point:
+    continuous-discrete (eq. 2.40-2.45: correction, control, propagation over dt) or the
+    continuous-time filter (Kalman-Bucy gain of the continuous Riccati equation, its
+    equations held over dt with u and y, the control read before the step)."""
+    dt, gap = setup.plant.sample_time_s, setup.reference.base_m
+    true = setup.true_plant or setup.plant
+    plant = control.c2d(true.linear_model(gap), dt, "zoh")
+    if setup.controller == "lead-lag":
+        compensator = setup.lead_lag.discrete(dt)            # u = u0 + C(z) (y - y_R)
+        return analysis.loop_at_plant_input(plant, compensator)
+    model = setup.plant.linear_model(gap)
+    F, B, H = (np.asarray(M) for M in (model.A, model.B, model.C))
+    r, gain = setup.sensor_noise_m ** 2, state_feedback_gain(setup)
+    Q = np.asarray(setup.filter_Q, dtype=float)
+    if setup.filter == "continuous-discrete":
+        discrete = control.c2d(model, dt, "zoh")
+        Ad, Bd = np.asarray(discrete.A), np.asarray(discrete.B)
+        P = scipy.linalg.solve_discrete_are(Ad.T, H.T, _discrete_noise(F, Q, dt), np.array([[r]]))
+        K = P @ H.T / (H @ P @ H.T + r)
+
+        def step(x_p, y):
+            x_hat = x_p + K[:, 0] * (y[0] - x_p[0])
+            u = gain @ x_hat
+            return Ad @ x_hat + Bd[:, 0] * u, np.array([u])
+    else:
+        r_c = r if setup.filter == "continuous-time" else r * dt
+        P = scipy.linalg.solve_continuous_are(F.T, H.T, Q, np.array([[r_c]]))
+        Kc = P @ H.T / r_c
+        held = control.c2d(control.ss(F - Kc @ H, np.hstack([B, Kc]), np.eye(3), np.zeros((3, 2))), dt, "zoh")
+        Af, Bf = np.asarray(held.A), np.asarray(held.B)
+
+        def step(x_hat, y):
+            u = gain @ x_hat
+            return Af @ x_hat + Bf[:, 0] * u + Bf[:, 1] * y[0], np.array([u])
+    return analysis.loop_at_plant_input(plant, analysis.state_space_from_step(step, 3, 1, dt))
