@@ -19,7 +19,7 @@ from lab_modules.plants.radial_bearing import RIG
 EXERCISES = tuple(registry())
 #: the exercises with a common gain factor and the pole set it moves
 LOCI = {"kalman_noise": ("gain_factor", "closed loop"), "sensor_placement": ("gain_factor", "closed loop"),
-        "ekf_disturbance": ("pid_gain", "closed loop (linearised at x = 0, PID on x̂, v̂, î)"),
+        "ekf_disturbance": ("pid_gain", "closed loop (linearised)"),
         "ekf_parameters": ("pid_gain", "closed loop (linear, rated k_i, k_x)"),
         "lqg_vs_pid": ("pid_gain", "PID loop with filter")}
 

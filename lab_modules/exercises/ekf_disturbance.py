@@ -74,7 +74,7 @@ LOAD_RAMP_S, SWEEP_START_S = 0.05, 0.1
 PLOT_POINTS = 800
 FIG_4_WINDOW_S = (0.005, 0.06)        # shown before and after the step
 #: the pole set of the linearised closed loop (and of its root locus)
-CLOSED_LOOP = "closed loop (linearised at x = 0, PID on x̂, v̂, î)"
+CLOSED_LOOP = "closed loop (linearised)"
 
 _shared = {p.name: p for p in NOISE_EXERCISE_PARAMETERS}
 _ekf = {p.name: p for p in EKF_PARAMETERS_EXERCISE_PARAMETERS}      # same filter noise sliders
@@ -314,9 +314,9 @@ class EkfDisturbance(Exercise):
         poles = {"open-loop plant": np.linalg.eigvals(np.asarray(plant.A)),
                  CLOSED_LOOP: analysis.z_to_s(analysis.loop_poles(linear_axis(values).loop()), T),
                  "filter error (at x = 0)": filter_poles(values)}
-        notes.append("Closed-loop poles: the PID on the rig's linear model (eq. 3-4) with the plant's sensor lag, "
-                     "fed by a steady-state Kalman filter of x, v, i with the same q_22, q_33 and R; the force "
-                     "state f_z and its feedforward are left out.")
+        notes.append("Closed-loop poles (linearised at x = 0): the PID on the rig's linear model (eq. 3-4) with "
+                     "the plant's sensor lag, fed by a steady-state Kalman filter of x, v, i with the same q_22, "
+                     "q_33 and R; the force state f_z and its feedforward are left out.")
         return Analysis(readouts, poles, notes, [fig_4_plot(values, step), *fig_5_plots(values, sweep)])
 
     def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
