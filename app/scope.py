@@ -105,6 +105,16 @@ def chart_options(x_label: str, y_label: str) -> dict:
             "padding": PADDING}
 
 
+def append(buffer: np.ndarray, trace: np.ndarray, rows: int) -> np.ndarray:
+    """The scope buffer after a frame's new samples ``trace``, at most ``rows`` long.  A trace that
+    starts at or before the buffer's newest time is a new run (a Reset, or a slider move the
+    exercise answers with a fresh simulation): the old window is dropped, not joined to it
+    (issue 11, defect 6: a diagonal line back to t = 0 and a gap in the ±3σ band)."""
+    if len(trace) and len(buffer) and trace[0, 0] <= buffer[-1, 0]:
+        buffer = buffer[:0]
+    return np.concatenate([buffer, trace])[-rows:]
+
+
 def spanning(rows: np.ndarray, window_ms: float) -> tuple[np.ndarray, np.ndarray]:
     """The frame's rows and their time axis [ms before the newest sample], starting exactly at
     −window: while the window fills (after a start or reset) the oldest row is repeated there,

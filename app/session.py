@@ -268,6 +268,7 @@ class LabSession:
         self.shown_analysis: Analysis | None = None   # the last analysis shown, redrawn with fresh scope readouts
         self.scene = exercise.scene(self.values)
         self._build_gui()
+        self._follow_ranges()
         self._check_open()
         if self.scene is not None:
             self.scene.attach(self.client.scene)
@@ -510,6 +511,22 @@ class LabSession:
         handle.on_update(self._on(("input", parameter.name), lambda p=parameter, h=handle: self._on_input(p, h.value)))
         return handle
 
+    def _follow_ranges(self) -> None:
+        """Sliders whose range depends on other values (e.g. the loaded recording's length) span that
+        range, the value clamped into it (issue 11, defect 11)."""
+        with self.lock:
+            values = dict(self.values)
+        for name, (low, high) in self.exercise.parameter_ranges(values).items():
+            handle = self.inputs.get(name)
+            if handle is None or not high > low:
+                continue
+            handle.min, handle.max = low, high
+            clamped = min(max(float(values[name]), low), high)
+            if clamped != values[name]:
+                handle.value = clamped
+                with self.lock:
+                    self.values[name] = clamped
+
     def _add_chart(self, chart: Chart):
         series = [viser.uplot.Series(label="time before now [ms]")]
         if chart.band:
@@ -563,6 +580,7 @@ class LabSession:
             self.values["data"] = data
             self._reset()
         self.recording = (uploaded.name, uploaded.content)
+        self._follow_ranges()
         self._changed()
         self._request_analysis()
 
@@ -720,7 +738,7 @@ class LabSession:
             steps, carry = int(carry), carry - int(carry)
             trace = self.simulation.advance(steps)
             window = self._window_rows()
-            self.buffer = np.concatenate([self.buffer, trace])[-window:]
+            self.buffer = scope.append(self.buffer, trace, window)
             message = self.simulation.status_message()
             if message:
                 self.running = False

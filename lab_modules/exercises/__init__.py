@@ -128,6 +128,11 @@ class Exercise:
     def metrics(self, values: dict, duration_s: float) -> dict:
         raise NotImplementedError
 
+    def parameter_ranges(self, values: dict) -> dict[str, tuple[float, float]]:
+        """Narrower (minimum, maximum) of parameters whose valid range depends on the other values,
+        e.g. on the loaded recording's length; the tab's sliders follow them."""
+        return {}
+
     def open_loops(self, values: dict) -> dict:
         """Feedback loops broken at the plant input, by name -> open loop L (``control`` LTI
         system, S = 1 / (1 + L)); the app draws their Bode plots, margins and |S|max."""

@@ -107,13 +107,22 @@ def recording(values: dict) -> recordings.Recording:
     return shipped_recording() if data is None else data
 
 
+def still_range_s(rec: recordings.Recording) -> tuple[float, float]:
+    """Where a still segment can lie [s]: the recording's own time span (the sliders follow it)."""
+    return float(rec.time_s[0]), float(rec.time_s[-1])
+
+
 def sensor_noise_m(rec: recordings.Recording, values: dict) -> float:
     """Eq. 3.3: sigma² = E[(y - mu)²] over the still segment (sample mean mu)."""
-    still = rec.window(values["still_start_s"], values["still_end_s"])
+    start, end = values["still_start_s"], values["still_end_s"]
+    first, last = still_range_s(rec)
+    if not first <= start < end <= last + 1e-9:
+        raise ParameterError(f"still segment {start:g} ... {end:g} s: start and end must lie inside the "
+                             f"recording's {first:g} ... {last:g} s, start before end")
+    still = rec.window(start, end)
     if np.count_nonzero(still) < 10:
-        raise ParameterError(f"still segment {values['still_start_s']:g} ... {values['still_end_s']:g} s "
-                             f"holds {np.count_nonzero(still)} samples; choose a window with at least 10 "
-                             f"inside the recording's 0 ... {rec.time_s[-1]:g} s")
+        raise ParameterError(f"still segment {start:g} ... {end:g} s holds {np.count_nonzero(still)} samples; "
+                             f"choose a window with at least 10 inside the recording's {first:g} ... {last:g} s")
     return float(np.std(rec.measured_m[still]))
 
 
@@ -239,6 +248,11 @@ class MaglevTuning(Exercise):
         if len(rec) < needed:
             rec = recordings.parse(filename, content, min_rows=needed)        # raises, naming the last line
         return rec
+
+    def parameter_ranges(self, values: dict) -> dict[str, tuple[float, float]]:
+        """The still-segment sliders span the loaded recording, not the parameters' 0 ... 3600 s."""
+        first, last = still_range_s(recording(values))
+        return {"still_start_s": (first, last), "still_end_s": (first, last)}
 
     def model(self, values: dict) -> dict:
         rec = recording(values)
