@@ -21,3 +21,28 @@ def test_still_segment_range_follows_the_recording():
     with pytest.raises(ParameterError, match=r"inside the recording's 0 \.\.\. 5\.999 s") as error:
         exercise.analyse(exercise.resolve({"still_start_s": 36.0, "still_end_s": 40.0}))
     assert "\n" not in str(error.value)
+
+
+# -- defect 4: maglev_tracking task 1 (η3 = −200) ---------------------------------------------------
+def _maglev_run(overrides: dict, seed: int, duration_s: float = 1.5):
+    from lab_modules.exercises.maglev_tracking import setup
+    from lab_modules.loops.maglev_loop import MaglevSimulation
+    exercise = get("maglev_tracking")
+    simulation = MaglevSimulation(setup(exercise.resolve({**overrides, "seed": seed})), seed=seed)
+    trace = simulation.run(duration_s)
+    return simulation, trace
+
+
+def test_maglev_task_1_holds_the_ball_at_its_stated_noise_and_explains_a_strike_at_the_default():
+    from pathlib import Path
+    sheet = (Path(__file__).resolve().parents[1] / "static" / "worksheets" / "maglev_tracking.md").read_text()
+    task = next(line for line in sheet.splitlines() if line.startswith("1. **Gain.**"))
+    assert "σ to 0.1 mm" in task and "η₃ to −200" in task and "strikes the magnet" in task
+    for seed in range(10):                           # the task's settings: the ball stays up on every seed
+        simulation, trace = _maglev_run({"pole_3_rad_s": -200.0, "sensor_noise_mm": 0.1}, seed)
+        assert simulation.status_message() == "", seed
+        assert np.abs(trace["coil_voltage_v"][trace["time_s"] > 0.3]).max() < 200.0
+    struck = [seed for seed in range(10) if _maglev_run({"pole_3_rad_s": -200.0}, seed, 0.3)[0].status_message()]
+    assert struck                                    # at σ = 1 mm some seeds strike (0, 3, 5 of 0-9) ...
+    message = _maglev_run({"pole_3_rad_s": -200.0}, struck[0], 0.3)[0].status_message()
+    assert "struck the magnet" in message and "guarded" in message and "x̂3" in message   # ... and say why
