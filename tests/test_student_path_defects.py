@@ -46,3 +46,31 @@ def test_maglev_task_1_holds_the_ball_at_its_stated_noise_and_explains_a_strike_
     assert struck                                    # at σ = 1 mm some seeds strike (0, 3, 5 of 0-9) ...
     message = _maglev_run({"pole_3_rad_s": -200.0}, struck[0], 0.3)[0].status_message()
     assert "struck the magnet" in message and "guarded" in message and "x̂3" in message   # ... and say why
+
+
+# -- defect 8: sensor_placement task 4 shows the mode instability, not the step's current kick --------
+def _placement_stop(gain_factor: float, step_um: float, n_steps: int = 8000) -> str:
+    exercise = get("sensor_placement")
+    simulation = exercise.simulation(exercise.resolve({"sensor_offset_mm": 0.0, "gain_factor": gain_factor,
+                                                       "reference_step_um": step_um}))
+    simulation.advance(n_steps)                      # 0.4 s
+    return simulation.status_message()
+
+
+def test_sensor_placement_task_4_raises_the_gain_without_the_step():
+    from pathlib import Path
+
+    from lab_modules.exercises.sensor_placement import largest_stable_gain
+    exercise = get("sensor_placement")
+    sheet = (Path(__file__).resolve().parents[1] / "static" / "worksheets" / "sensor_placement.md").read_text()
+    task = sheet[sheet.index("4. **Integrated sensor.**"):sheet.index("\n5. ")]
+    assert "reference step to 0" in task
+    limit, mode = largest_stable_gain(exercise.resolve({"sensor_offset_mm": 0.0}))
+    assert 1.75 < limit < 2.5
+    # with the default 50 µm step the run stops on the current limit at a stable gain (the old task) ...
+    kicked = _placement_stop(0.9 * limit, 50.0)
+    assert "amplifier's limit" in kicked and "loop is stable" in kicked and "reference step to 0" in kicked
+    # ... without it the stable gain runs on and the first unstable one stops naming its mode
+    assert _placement_stop(0.95 * limit, 0.0) == ""
+    unstable = _placement_stop(1.03 * limit, 0.0)
+    assert f"mode {mode} grows" in unstable

@@ -434,7 +434,9 @@ class SensorPlacement(Exercise):
         def explain() -> str:
             modes_s = mode_poles(closed, int(values["modes"]))
             if stable(closed):
-                return "The linear loop is stable: the reference step or the noise was too large."
+                return ("The linear loop is stable: the reference step (the PID's derivative kick on the "
+                        "step) or the noise was too large. Set the reference step to 0 to see the loop's own "
+                        "stability.")
             return (f"The loop is unstable: {unstable_mode_sentence(modes_s)}. "
                     "Move the sensor or change the gain, then reset.")
         return LoopSimulation(closed, simulation_inputs(values), values["disturbance_force_n"],
