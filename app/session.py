@@ -104,7 +104,9 @@ def escaped(text) -> str:
     return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
 
 
-def _format(value: float) -> str:
+def _format(value: float | str) -> str:
+    if isinstance(value, str):                        # a word instead of a number ("touched down")
+        return value
     if np.isnan(value):
         return "…"
     if np.isinf(value):

@@ -74,3 +74,52 @@ def test_sensor_placement_task_4_raises_the_gain_without_the_step():
     assert _placement_stop(0.95 * limit, 0.0) == ""
     unstable = _placement_stop(1.03 * limit, 0.0)
     assert f"mode {mode} grows" in unstable
+
+
+# -- defect 7: kalman_noise's consistency readouts rest on enough independent samples -----------------
+def test_kalman_consistency_readouts_hold_where_the_50ms_window_swung():
+    from lab_modules.exercises.kalman_noise import T, consistency, setup
+    from lab_modules.loops.radial_axis_experiment import AxisSimulation
+    from lab_modules.loops.radial_axis_loop import TRACE_COLUMNS
+    exercise = get("kalman_noise")
+    windows = []
+    for seed in range(3):
+        values = exercise.resolve({"seed": seed})
+        run = consistency(values)
+        assert 0.85 <= run["mean_nees"] <= 1.15 and run["inside_3sigma_percent"] >= 99.3, (seed, run)
+        assert run["independent_samples"] >= 500
+        # the old readouts: 50 ms scope windows of the same kind of run
+        simulation = AxisSimulation(setup(values), seed=seed)
+        simulation.advance(2000)
+        trace = simulation.advance(round(1.0 / T))
+        column = {name: 1 + i for i, name in enumerate(TRACE_COLUMNS)}
+        z = (trace[:, column["x_estimated_m"]] - trace[:, column["x_true_m"]]) / trace[:, column["x_sigma_m"]]
+        n = round(0.05 / T)
+        windows += [(np.mean(w**2), 100 * np.mean(np.abs(w) <= 3)) for w in z[: len(z) // n * n].reshape(-1, n)]
+    nees, inside = np.array(windows).T
+    assert nees.min() < 0.85 or nees.max() > 1.15      # the bound above would have failed on the scope window
+    assert inside.min() < 99.3
+
+
+def test_kalman_consistency_is_shown_with_its_sample_count_and_flags_a_mistuned_filter():
+    exercise = get("kalman_noise")
+    final = list(exercise.analyse(exercise.resolve({})))[-1]
+    readouts = {label: value for label, value, _ in final.readouts}
+    assert 500 <= readouts["Independent samples behind these two"] <= 3000
+    overconfident = list(exercise.analyse(exercise.resolve({"filter_r_position": 7.1e-5})))[-1]
+    nees = next(v for label, v, _ in overconfident.readouts if label.startswith("Mean (error/σ)²"))
+    assert nees > 4.0                                 # R_x ten times too small: about 8
+
+
+def test_independent_samples_of_an_ar1_sequence():
+    from lab_modules.analysis import independent_samples
+    rng = np.random.default_rng(1)
+    rho, n = 0.9, 200_000
+    x = np.empty(n)
+    x[0] = 0.0
+    noise = rng.standard_normal(n)
+    for k in range(1, n):
+        x[k] = rho * x[k - 1] + noise[k]
+    expected = n * (1 - rho**2) / (1 + rho**2)       # N / (1 + 2 Σ ρ^2k)
+    assert abs(independent_samples(x) / expected - 1) < 0.1
+    assert abs(independent_samples(noise) / n - 1) < 0.02
