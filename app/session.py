@@ -104,14 +104,25 @@ def escaped(text) -> str:
     return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
 
 
+SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
+
+
 def _format(value: float | str) -> str:
-    if isinstance(value, str):                        # a word instead of a number ("touched down")
+    """A readout's value as a student reads it: 3 significant digits, thousands grouped up to 10⁹
+    ("480 000"), powers of ten written out beyond ("7.5·10⁻⁸"), a word as it is ("touched down")."""
+    if isinstance(value, str):                        # a word instead of a number
         return value
     if np.isnan(value):
-        return "…"
+        return "—"
     if np.isinf(value):
         return "∞ (unstable)"
-    return f"{value:.3g}" if abs(value) < 1e4 else f"{value:.3e}"
+    if 1e3 <= abs(value) < 1e9:
+        return f"{float(f'{value:.4g}'):,.0f}".replace(",", " ")   # narrow no-break space
+    text = f"{value:.3g}"
+    if "e" in text:
+        mantissa, exponent = text.split("e")
+        return f"{mantissa}·10{str(int(exponent)).translate(SUPERSCRIPT)}"
+    return text
 
 
 def _analyses(result: Analysis | Iterator[Analysis]) -> Iterator[Analysis]:

@@ -123,3 +123,49 @@ def test_independent_samples_of_an_ar1_sequence():
     expected = n * (1 - rho**2) / (1 + rho**2)       # N / (1 + 2 Σ ρ^2k)
     assert abs(independent_samples(x) / expected - 1) < 0.1
     assert abs(independent_samples(noise) / n - 1) < 0.02
+
+
+# -- defect 14: every readout is a plain name with its unit and a number (or a clear word) -----------
+FORMULA_MARKS = ("=", "√", "e^(", "1/L", "²h", "Kd·", "·Kp")
+UNIT_WORDS = ("…", "#", ",", " and", "of ", "mode")
+WORDS = {"touched down", "not reached", "computing …", "none"} | {f"mode {j}" for j in range(1, 7)}
+
+
+def _check_readouts(name: str, readouts) -> None:
+    import re
+
+    from app.session import _format
+    for label, value, unit in readouts:
+        assert not any(mark in label for mark in FORMULA_MARKS), (name, label)
+        assert not label.startswith("…"), (name, label)
+        assert not any(word in unit for word in UNIT_WORDS), (name, label, unit)
+        assert not re.search(r"\d", re.sub(r"^1/", "", unit)), (name, label, unit)   # no numbers in a unit
+        if isinstance(value, str):
+            assert value in WORDS, (name, label, value)
+        else:
+            shown = _format(value)
+            assert np.isfinite(value) or np.isinf(value), (name, label, "a NaN says nothing: use a word")
+            assert "e+" not in shown and "e-" not in shown, (name, label, shown)
+
+
+@pytest.mark.parametrize("name", ["kalman_noise", "ekf_parameters", "ekf_disturbance", "lqg_vs_pid",
+                                  "sensor_placement", "maglev_tracking", "maglev_tuning", "thrust_liftoff",
+                                  "self_sensing", "stiffness_map", "adaptive_filter"])
+def test_readouts_are_names_units_and_numbers(name):
+    from lab_modules.exercises import Analysis
+    exercise = get(name)
+    values = exercise.resolve({})
+    result = exercise.analyse(values)
+    results = [result] if isinstance(result, Analysis) else list(result)
+    for analysis in results:
+        _check_readouts(name, analysis.readouts)
+    simulation = exercise.simulation(values)
+    trace = simulation.advance(max(round(0.05 / simulation.sample_time_s), 20))
+    _check_readouts(name, exercise.live_readouts({c: trace[:, 1 + i] for i, c in enumerate(simulation.columns)}))
+
+
+def test_readout_numbers_read_as_numbers():
+    from app.session import _format
+    assert _format(480_000.0) == "480\u202f000" and _format(1.03e6) == "1\u202f030\u202f000"
+    assert _format(7.5e-8) == "7.5·10⁻⁸" and _format(240.0) == "240" and _format(-1700.0) == "-1\u202f700"
+    assert _format("touched down") == "touched down" and _format(float("nan")) == "—"

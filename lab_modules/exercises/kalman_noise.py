@@ -267,7 +267,7 @@ class KalmanNoise(Exercise):
             ("Kalman gain K_v (v ← position)", K[1, 0] * 1e3, "mm/s/V"),
         ]
         run_s = f"{CONSISTENCY_RUN_S:g} s run"
-        consistency_labels = (f"Estimate error inside ±3σ ({run_s})", f"Mean (error/σ)² of x ({run_s}; 1 = consistent)",
+        consistency_labels = (f"Estimate error inside ±3σ ({run_s})", f"Mean (error/σ)² of x, {run_s} (1 if consistent)",
                               "Independent samples behind these two")
         notes = [f"Gain criterion: {GAIN_CRITERION}.",
                  (f"Filter consistency: measured on a separate {run_s} at these settings and seed (the 50 ms "

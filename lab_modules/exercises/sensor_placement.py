@@ -381,7 +381,7 @@ class SensorPlacement(Exercise):
         sensor = "integrated capacitive" if integrated(values["sensor_offset_mm"]) else "eddy-current track"
         readouts = [(f"Natural frequency, mode {j + 1}", f, "Hz") for j, f in enumerate(frequencies)]
         readouts += [("Largest stable gain factor here", max_gain, "×"),
-                     ("Mode that goes unstable first", float(first_mode or 0), "mode #"),
+                     ("Mode that goes unstable first", f"mode {first_mode}" if first_mode else "none", ""),
                      ("Sensor noise σ (" + sensor + ")", sensor_noise_m(values) * 1e6, "µm")]
         for j in range(n):
             readouts += [(f"Mode {j + 1}: residue sign φ(actuator)·φ(sensor)", float(signs[j]), ""),
