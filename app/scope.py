@@ -86,8 +86,12 @@ class StickyRange:
 
 #: An invisible series over the sticky range: uPlot's auto range then covers exactly it.  (Changing
 #: the scale options instead makes viser rebuild the chart, which now and then came up without axes.)
+#: Its legend entry is hidden by ``LEGEND_STYLE`` (uPlot puts a series' ``class`` on its legend row).
+ANCHOR_CLASS = "lab-range-anchor"
 ANCHOR_SERIES = viser.uplot.Series(label="range", stroke="rgba(0,0,0,0)", width=0,
-                                   points=viser.uplot.Series_Points(show=False))
+                                   points=viser.uplot.Series_Points(show=False), **{"class": ANCHOR_CLASS})
+#: A style element for the page (``gui.add_html``): the anchor series stays out of the legends.
+LEGEND_STYLE = f"<style>.u-legend .{ANCHOR_CLASS} {{ display: none; }}</style>"
 
 
 def anchor(y_range: tuple[float, float] | None, n: int) -> np.ndarray:

@@ -419,6 +419,7 @@ class LabSession:
         if self.exercise.download_label:
             download = gui.add_button(self.exercise.download_label, icon=viser.Icon.DOWNLOAD)
             download.on_click(self._on("download", self._on_download))
+            self.download_note = gui.add_markdown("")     # what the button did, where the student looks
         self.inputs: dict[str, viser.GuiInputHandle] = {}
         groups: dict[str, list[Parameter]] = {}
         for parameter in self.exercise.parameters:
@@ -428,6 +429,7 @@ class LabSession:
                 for parameter in parameters:
                     self.inputs[parameter.name] = self._add_input(parameter)
         gui.add_markdown(NUMBER_BOX_HINT)
+        gui.add_html(scope.LEGEND_STYLE)
         self.error = gui.add_markdown("")
         if self.store is not None:
             with gui.add_folder("Saved experiment", expand_by_default=False):
@@ -598,12 +600,17 @@ class LabSession:
         self._request_analysis()
 
     def _on_download(self) -> None:
+        """Make the file; the note under the button says what happened (issue 11, defect 5: the
+        reason a recording failed used to appear below the fold of the left panel)."""
+        self.download_note.content = "*Preparing the file …*"
+        self.client.flush()
         try:
             filename, content = self.exercise.download(dict(self.values))
         except ParameterError as error:
-            self.error.content = f"⚠️ {error}"
+            self.download_note.content = f"⚠️ {escaped(error)}"
             return
         self.client.send_file_download(filename, content, save_immediately=True)
+        self.download_note.content = f"Sent {escaped(filename)} ({len(content) / 1e3:.0f} kB)."
 
     def _on_button(self, which: str) -> None:
         with self.lock:
