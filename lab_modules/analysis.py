@@ -10,6 +10,7 @@ functions (poles, step responses) apply directly.
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 
 import control
@@ -30,10 +31,25 @@ def steady_state_kalman(model: control.StateSpace, Q, R):
     returned K is eq. 2's correction gain P C^T (C P C^T + R)^-1, not the
     predictor gain A K that ``dlqe`` itself returns.
     """
-    A, C = np.asarray(model.A), np.asarray(model.C)
-    _, P, _ = control.dlqe(A, np.eye(A.shape[0]), C, Q, R)
-    K = P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
-    return K, P
+    A, C, Q, R = (np.ascontiguousarray(M, dtype=float) for M in (model.A, model.C, Q, R))
+    key = tuple((M.shape, M.tobytes()) for M in (A, C, Q, R))
+    with _kalman_lock:
+        cached = _kalman_cache.get(key)
+    if cached is None:
+        _, P, _ = control.dlqe(A, np.eye(A.shape[0]), C, Q, R)
+        cached = (P @ C.T @ np.linalg.inv(C @ P @ C.T + R), P)
+        with _kalman_lock:                        # the analysis threads of all tabs share it
+            _kalman_cache[key] = cached
+            while len(_kalman_cache) > KALMAN_CACHE:
+                _kalman_cache.pop(next(iter(_kalman_cache)))
+    return cached[0].copy(), cached[1].copy()
+
+
+#: Riccati solutions kept (the analysis, the pole map's root locus and the sweeps of one
+#: setting ask for the same filter; a solve takes milliseconds)
+KALMAN_CACHE = 64
+_kalman_cache: dict = {}
+_kalman_lock = threading.Lock()
 
 
 @dataclass(frozen=True)

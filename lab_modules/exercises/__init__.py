@@ -48,6 +48,7 @@ class Plot:
     points: bool = False                              # markers only (scatter)
     log_x: bool = False                               # logarithmic axes (positive values only)
     log_y: bool = False
+    shade: tuple[tuple[float, float], ...] = ()       # x intervals shaded in live plots (e.g. fit windows)
 
 
 @dataclass
@@ -58,6 +59,20 @@ class Analysis:
     poles: dict[str, np.ndarray]                      # name -> continuous-equivalent poles [rad/s]
     notes: list[str] = field(default_factory=list)
     plots: list[Plot] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class Action:
+    """A button of an exercise that runs a longer computation on demand (a Monte-Carlo run ...).
+
+    ``method`` names an exercise method taking the parameter ``values``: it returns an
+    ``Analysis`` or yields several (progress first, the result last; ``poles`` are not
+    shown).  The app runs it in the background: the tab stays live, a second press
+    starts it afresh, an exercise switch stops it at its next yield."""
+
+    label: str                                        # the button's text
+    method: str
+    hint: str = ""
 
 
 class Simulation(Protocol):
@@ -103,6 +118,10 @@ class Exercise:
     data_description: str | None = None   # set: the exercise accepts an uploaded CSV
     download_label: str | None = None     # set: a button offers ``download(values)`` as a file
     claims: tuple[Claim, ...] = ()        # the paper's headline results, measured by ``metrics``
+    actions: tuple[Action, ...] = ()      # buttons that run a method in the background (see ``Action``)
+    #: (parameter, pole set): a common gain factor and the closed-loop set of ``Analysis.poles`` it
+    #: moves; the pole map draws that set's paths as the factor sweeps its range (root locus)
+    locus: tuple[str, str] | None = None
 
     def resolve(self, overrides: dict | None = None) -> dict:
         overrides = dict(overrides or {})
@@ -133,6 +152,12 @@ class Exercise:
         e.g. on the loaded recording's length; the tab's sliders follow them."""
         return {}
 
+    def locus_matrices(self, values: dict, factors: tuple[float, ...]) -> tuple[list[np.ndarray], float | None]:
+        """For ``locus``: the state matrices of that closed loop with the parameter at each of
+        ``factors`` (the others as in ``values``) and their sample time [s] (None: continuous).
+        They must be affine in the factor (it scales the controller's output)."""
+        raise NotImplementedError
+
     def open_loops(self, values: dict) -> dict:
         """Feedback loops broken at the plant input, by name -> open loop L (``control`` LTI
         system, S = 1 / (1 + L)); the app draws their Bode plots, margins and |S|max."""
@@ -140,6 +165,12 @@ class Exercise:
 
     def live_readouts(self, trace: dict[str, np.ndarray]) -> list[tuple[str, float, str]]:
         """Readouts from the scope's buffer (column name -> samples)."""
+        return []
+
+    def live_plots(self, simulation: Simulation) -> list[Plot]:
+        """Plots of the running simulation's newest state (e.g. the raw samples of its last
+        periods), redrawn by the app a few times a second beside the scope; keep each to a
+        few thousand points.  Their number and series must not change during a run."""
         return []
 
     def scene(self, values: dict) -> SceneView | None:

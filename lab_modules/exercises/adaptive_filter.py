@@ -54,6 +54,7 @@ from lab_modules.loops.axial_bearing_loop import (
 )
 from lab_modules.parameters import Parameter
 from lab_modules.plants.axial_bearing import AXIAL, GRID_CURRENTS_A, GRID_POSITIONS_M, N_PER_MM
+from lab_modules.scenes.force_map import OperatingPointScene
 
 T = SAMPLE_TIME_S
 PERIOD_S = 0.6
@@ -355,6 +356,10 @@ class AdaptiveFilter(Exercise):
             "operating_points_current_a_position_mm": [[i, 1e3 * x] for i, x in stats["points"]],
             "windows_s": [list(w) for w in WINDOWS], "status": status or "ok", "duration_s": max(duration_s, PERIOD_S),
         }
+
+    def scene(self, values: dict) -> OperatingPointScene:
+        """The operating point (i, x, F_Magnet) moving on the force map F(i, x)."""
+        return OperatingPointScene(values)
 
     def live_readouts(self, trace: dict[str, np.ndarray]) -> list[tuple[str, float, str]]:
         """Over the last 50 ms of the scope: F̂_St bias and x̂ RMS per filter."""

@@ -338,6 +338,7 @@ class SensorPlacement(Exercise):
     parameters = PARAMETERS
     default_duration_s = 0.3
     claims = CLAIMS
+    locus = ("gain_factor", "closed loop")
     charts = (
         Chart("Rotor position", "µm", (
             Series("reference", "reference_m", 1e6, "#7f7f7f"),
@@ -346,6 +347,10 @@ class SensorPlacement(Exercise):
             Series("rotor at the bearing", "x_bearing_m", 1e6, "#1f77b4"))),
         Chart("Control current", "A", (Series("coil current i", "current_a", 1.0, "#2ca02c"),)),
     )
+
+    def locus_matrices(self, values: dict, factors: tuple[float, ...]) -> tuple[list[np.ndarray], float]:
+        """The closed loop's state matrices at these gain factors."""
+        return [np.asarray(loop(values, factor).A) for factor in factors], T
 
     def model(self, values: dict) -> dict:
         r = rotor(values["modal_damping_percent"] / 100)

@@ -116,6 +116,12 @@ class AxisSetup:
             loop = analysis.with_reference_filter(loop, self.reference_filter)
         return loop
 
+    def loop_matrix(self, gain_factor: float = 1.0) -> np.ndarray:
+        """State matrix of the loop's states in the feedback (``loop_poles`` are its eigenvalues),
+        affine in ``gain_factor`` (the pole map's root locus)."""
+        loop = self.loop(gain_factor=gain_factor)
+        return np.asarray(loop.system.A)[loop.loop_states, loop.loop_states]
+
     def loop_at_plant_input(self, gain_factor: float = 1.0) -> control.StateSpace:
         """Open loop L broken at the plant input (i_ref): plant, filter, controller and state
         feedback in series, sign included, so S = 1 / (1 + L) (for margins and |S|max)."""
