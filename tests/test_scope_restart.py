@@ -37,12 +37,12 @@ def test_append_drops_the_old_window_when_time_restarts():
 def test_scope_buffer_after_a_slider_move_and_a_reset(name):
     exercise = EXERCISES[name]
     values = exercise.resolve({})
-    simulation = exercise.simulation(values)
-    steps = max(round(0.005 / simulation.sample_time_s), 20)
-    buffer = scope.append(np.empty((0, 1 + len(simulation.columns))), simulation.advance(steps), 10**6)
-    for simulation in (exercise.retune(simulation, _moved(exercise, values)), exercise.simulation(values)):
+    first = exercise.simulation(values)
+    steps = max(round(0.005 / first.sample_time_s), 20)
+    buffer = scope.append(np.empty((0, 1 + len(first.columns))), first.advance(steps), 10**6)
+    for following in (exercise.retune(first, _moved(exercise, values)), exercise.simulation(values)):
         before = buffer[-1, 0]
-        trace = simulation.advance(steps)
+        trace = following.advance(steps)
         buffer = scope.append(buffer, trace, 10**6)
         assert np.all(np.diff(buffer[:, 0]) > 0), name
         if trace[0, 0] <= before:                     # a new run: the buffer holds it alone

@@ -108,8 +108,10 @@ def recording(values: dict) -> recordings.Recording:
 
 
 def still_range_s(rec: recordings.Recording) -> tuple[float, float]:
-    """Where a still segment can lie [s]: the recording's own time span (the sliders follow it)."""
-    return float(rec.time_s[0]), float(rec.time_s[-1])
+    """Where a still segment can lie [s]: the recording's own time span, to the end of its last
+    sample interval (the sliders follow it)."""
+    step = float(np.median(np.diff(rec.time_s))) if len(rec) > 1 else 0.0
+    return float(rec.time_s[0]), round(float(rec.time_s[-1]) + step, 9)
 
 
 def sensor_noise_m(rec: recordings.Recording, values: dict) -> float:
