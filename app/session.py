@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import viser
 
-from app import layout, margins, pole_map, scope, worksheets
+from app import export, inspector, layout, margins, pole_map, scope, worksheets
 from app.access import token_matches
 from app.actions import ActionPanel
 from app.live import LivePlots, SpeedMeter
@@ -102,6 +102,11 @@ def escaped(text) -> str:
     Markdown renders raw HTML)."""
     text = re.sub(r"([\\`*_{}\[\]()#+\-.!|~])", r"\\\1", str(text))
     return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+
+
+def _cell(text: str) -> str:
+    """A readout's label or unit as one Markdown table cell: "|S|max" must not end the cell."""
+    return str(text).replace("|", "\\|")
 
 
 SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
@@ -406,6 +411,7 @@ class LabSession:
         buttons = gui.add_button_group("Simulation", ("Run", "Pause", "Reset"))
         buttons.on_click(self._on("buttons", lambda: self._on_button(buttons.value)))
         self.speed, self.speed_meter = gui.add_markdown(""), SpeedMeter()   # filled in while it runs
+        inspector.add_controls(self)                  # step one sample, the filter's numbers (app/inspector.py)
         self.action_panel = ActionPanel(self, gui, _plot_chart)   # the exercise's buttons, if any
         if self.scene is not None:
             refresh = gui.add_dropdown("3D view", tuple(SCENE_REFRESH), initial_value=self.scene_refresh,
@@ -467,6 +473,7 @@ class LabSession:
             self.y_ranges = [scope.StickyRange() for _ in self.exercise.charts]
             self.charts = [self._add_chart(chart) for chart in self.exercise.charts]
             self.readouts = gui.add_markdown("*computing …*")
+            export.add_buttons(self)                  # CSV and PNG for a lab report (app/export.py)
         with self.tabs["Pole map"]:
             self.shown_poles = pole_map.view(self.exercise, dict(self.values), first.poles)
             self.pole_plots = tuple(gui.add_uplot(data, **options, aspect=1.6)
@@ -477,10 +484,11 @@ class LabSession:
                              "well-damped poles (sensor lag, amplifier) that squash the second.")
             self.pole_table = gui.add_markdown(pole_map.table_markdown(first.poles))
         with self.tabs["Analysis"]:
-            self.plots = []
+            self.plots, self.plot_shapes = [], []
             for plot in first.plots:
                 data, options = _plot_chart(plot)
                 self.plots.append(gui.add_uplot(data, **options, aspect=2.0))
+                self.plot_shapes.append(_plot_shape(plot))
             if not first.plots:
                 gui.add_markdown("*This exercise has no analysis plots.*")
         worksheet = worksheets.current(self.exercise)    # claims table filled in as it is measured
@@ -632,6 +640,7 @@ class LabSession:
             self.status.content = "**Running**" if self.running else "**Paused**"
             if not self.running:
                 self.speed.content = ""
+            inspector.refresh(self)
 
     def _reset(self) -> None:
         self.simulation = self.exercise.simulation(self.values)
@@ -678,6 +687,29 @@ class LabSession:
                         self.shown_analysis = None        # the message stays until an analysis succeeds
                         self.readouts.content = f"⚠️ The analysis failed at these settings: {error}"
 
+    def _update_plots(self, plots) -> None:
+        """The Analysis tab's charts show ``plots`` (call holding ``gui_lock``).  A later result of
+        ``analyse`` (or the margins appended after it) may hold more, fewer or other plots than the
+        first: a chart whose plot changed gets its series, axes and title too, not only the data
+        (else its legend and log axes belong to another plot); missing charts are added at the end."""
+        for k, plot in enumerate(plots):
+            data, options = _plot_chart(plot)
+            if k >= len(self.plots):
+                with self.tabs["Analysis"]:
+                    self.plots.append(self.client.gui.add_uplot(data, **options, aspect=2.0))
+                self.plot_shapes.append(_plot_shape(plot))
+            elif self.plot_shapes[k] == _plot_shape(plot):
+                self.plots[k].data, self.plots[k].scales = data, options["scales"]
+            else:
+                with self.client.atomic():            # series, axes and data change together
+                    handle = self.plots[k]
+                    handle.series, handle.axes, handle.data = options["series"], options["axes"], data
+                    handle.scales, handle.title = options["scales"], options["title"]
+                self.plot_shapes[k] = _plot_shape(plot)
+        for handle in self.plots[len(plots):]:
+            handle.remove()
+        del self.plots[len(plots):], self.plot_shapes[len(plots):]
+
     def _show(self, generation: int, result: Analysis) -> bool:
         """Show an analysis; False if the tab no longer shows its exercise."""
         with self.gui_lock:
@@ -686,10 +718,7 @@ class LabSession:
             self.shown_analysis = result
             self.readouts.content = self._readouts_markdown(result)
             self.client.flush()                       # the readouts go out now, not with the next window
-            for handle, plot in zip(self.plots, result.plots):
-                data, options = _plot_chart(plot)
-                handle.data, handle.scales, handle.title = data, options["scales"], options["title"]
-            self._add_plots(result.plots[len(self.plots):])
+            self._update_plots(result.plots)
             exercise, values = self.exercise, dict(self.values)
         poles = pole_map.view(exercise, values, result.poles)   # the root locus: cached per setting
         with self.gui_lock:
@@ -704,24 +733,14 @@ class LabSession:
                     self.pole_table.content = pole_map.table_markdown(result.poles)
         return True
 
-    def _add_plots(self, plots: list[Plot]) -> None:
-        """Analysis plots beyond those the tab has: an analysis that yields a quick result
-        first brings the rest later (call holding ``gui_lock``)."""
-        if not plots:
-            return
-        with self.tabs["Analysis"]:
-            for plot in plots:
-                data, options = _plot_chart(plot)
-                self.plots.append(self.client.gui.add_uplot(data, **options, aspect=2.0))
-
     def _readouts_markdown(self, result: Analysis) -> str:
         """The readouts table: the analysis's figures, then the exercise's figures of the scope window."""
         lines = ["| quantity | value | unit |", "|---|---:|---|"]
-        lines += [f"| {label} | {_format(value)} | {unit} |" for label, value, unit in result.readouts]
+        lines += [f"| {_cell(label)} | {_format(value)} | {_cell(unit)} |" for label, value, unit in result.readouts]
         with self.lock:
             trace = {name: self.buffer[:, column] for name, column in self.columns.items()}
         if len(next(iter(trace.values()), ())) >= 10:
-            lines += [f"| {label} (scope window) | {_format(value)} | {unit} |"
+            lines += [f"| {_cell(label)} (scope window) | {_format(value)} | {_cell(unit)} |"
                       for label, value, unit in self.exercise.live_readouts(trace)]
         return "\n".join(lines) + "\n\n" + "\n\n".join(f"*{n}*" for n in result.notes)
 
@@ -911,6 +930,12 @@ def _scope_rows(buffer: np.ndarray, columns: list[int], sample_time_s: float,
 def _float32_resolves(t_ms: np.ndarray, step_ms: float) -> bool:
     """Whether float32 keeps times ``step_ms`` apart distinct (long runs need float64)."""
     return bool(np.spacing(np.float32(np.abs(t_ms).max())) <= step_ms / 16)
+
+
+def _plot_shape(plot: Plot) -> tuple:
+    """What a chart keeps between data updates: title, axes, series and their scales."""
+    return (plot.title, plot.x_label, plot.y_label, plot.log_x, plot.log_y, plot.points,
+            tuple((label, color) for label, _, color in plot.series))
 
 
 def _plot_chart(plot: Plot) -> tuple[tuple, dict]:

@@ -87,6 +87,14 @@ class Simulation(Protocol):
     def status_message(self) -> str:
         """'' while running; a sentence saying why it stopped (touchdown, divergence ...)."""
 
+    # Optional, for simulations with a Kalman filter (the app's filter inspector):
+    # ``filter_state() -> dict | None``: the filter at the sample of the last ``advance(1)``
+    # (None if the last advance ran more samples: the loops then keep nothing extra), after its
+    # correction with that sample's measurement: ``title``, ``time_s``, ``states``
+    # ((label, SI unit), ...), ``x`` (n,), ``P`` (n, n), ``measurements`` ((label, unit), ...),
+    # ``K`` (n, m), ``innovation`` (m,) and ``innovation_sigma`` (m,) = √diag(S) against the
+    # prior (K and the innovation None for a filter that corrects continuously).
+
 
 class SceneView(Protocol):
     """An optional 3D view of an exercise in the tab's viser scene."""
@@ -118,6 +126,9 @@ class Exercise:
     data_description: str | None = None   # set: the exercise accepts an uploaded CSV
     download_label: str | None = None     # set: a button offers ``download(values)`` as a file
     claims: tuple[Claim, ...] = ()        # the paper's headline results, measured by ``metrics``
+    #: Why the exercise has no feedback loop to grade (then ``open_loops`` stays empty); every
+    #: exercise either declares its loops or says here why it has none (tested).
+    no_feedback_loop: str = ""
     actions: tuple[Action, ...] = ()      # buttons that run a method in the background (see ``Action``)
     #: (parameter, pole set): a common gain factor and the closed-loop set of ``Analysis.poles`` it
     #: moves; the pole map draws that set's paths as the factor sweeps its range (root locus)

@@ -51,6 +51,7 @@ from lab_modules.loops.axial_bearing_loop import (
     LoopSimulation,
     Segment,
     column,
+    loop_at_plant_input,
 )
 from lab_modules.parameters import Parameter
 from lab_modules.plants.axial_bearing import AXIAL, GRID_CURRENTS_A, GRID_POSITIONS_M, N_PER_MM
@@ -150,6 +151,9 @@ class AdaptiveFilterSimulation:
             errors.append(column(trace, f"{f}_x_m") - column(trace, "x_true_m"))
             errors.append(column(trace, f"{f}_force_n") - column(trace, "disturbance_n"))
         return np.column_stack([trace, *errors]) if trace.size else np.empty((0, 1 + len(self.columns)))
+
+    def filter_state(self) -> dict | None:
+        return self.loop.filter_state()
 
     def status_message(self) -> str:
         return self.loop.status_message()
@@ -313,6 +317,11 @@ class AdaptiveFilter(Exercise):
                 "outputs": ["y = x_M [V]"], "sample_time_s": T, "A_centre": A.tolist(), "B_centre": B.tolist(),
                 "H": [[0.0, 0.0, 0.0, 1.0]], "Q_centre": Q.tolist(), "R": [[values["var_sensor_v2"]]],
                 "filters": {f: LABELS[f] for f in FILTERS}, "feedback": values["feedback"]}
+
+    def open_loops(self, values: dict) -> dict:
+        """The PID position loop at the centre operating point, on the chosen feedback."""
+        setup_ = setup(values)
+        return {f"PID on {setup_.feedback}": loop_at_plant_input(setup_)}
 
     def analyse(self, values: dict):
         trace, status = run(values)

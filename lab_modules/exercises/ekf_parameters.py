@@ -41,7 +41,14 @@ from lab_modules.estimators import extended_kalman as ef
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
 from lab_modules.exercises._common import ekf_loop_fields, pid_from_values
 from lab_modules.exercises.kalman_noise import PARAMETERS as NOISE_EXERCISE_PARAMETERS
-from lab_modules.loops.radial_axis_ekf_loop import EKFLoopSetup, EKFLoopSimulation, Prbs, column
+from lab_modules.loops.radial_axis_ekf_loop import (
+    EKFLoopSetup,
+    EKFLoopSimulation,
+    Prbs,
+    column,
+    loop_at_plant_input,
+    rest_current_a,
+)
 from lab_modules.loops.radial_axis_experiment import AxisSetup
 from lab_modules.parameters import Parameter
 from lab_modules.plants.radial_bearing import RIG
@@ -135,12 +142,7 @@ def linear_poles(axis: AxisSetup) -> dict[str, np.ndarray]:
 def operating_point(offset_m: float) -> tuple[float, float]:
     """(k_x [N/m], k_i [N/A]) of eq. 10 at rest at x = offset: the current that
     balances the force, f_m(x, i) = 0, found by Newton's method on eq. 10."""
-    physics = ef.physics_vector(RIG)
-    current = 0.0
-    for _ in range(20):
-        _kx, ki = ef.local_factors(offset_m, current, physics)
-        current -= RIG.magnetic_force(offset_m, current) / ki
-    return ef.local_factors(offset_m, current, physics)
+    return ef.local_factors(offset_m, rest_current_a(RIG, offset_m), ef.physics_vector(RIG))
 
 
 def final_errors(trace: np.ndarray) -> dict[str, float]:
@@ -201,6 +203,11 @@ class EkfParameters(Exercise):
                 "G": ef.measurement_matrix(ef.LINEARISED).tolist(),
                 "Q": axis.filter_Q.tolist(), "R": np.diag(axis.filter_R_diag).tolist(),
                 "x0": axis.filter_x0.tolist(), "P0": axis.filter_P0.tolist()}
+
+    def open_loops(self, values: dict) -> dict:
+        """The PID loop linearised at the operating point x_0, the EKF at its converged estimates."""
+        return {f"PID, {values['feedback']} x": loop_at_plant_input(
+            setup(values), values["reference_offset_um"] * 1e-6)}
 
     def analyse(self, values: dict) -> Analysis:
         offset = values["reference_offset_um"] * 1e-6

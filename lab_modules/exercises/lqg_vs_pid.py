@@ -578,6 +578,11 @@ class SideBySide:
         parts += [trace[:rows, [1 + TRACE_COLUMNS.index(c) for c in SCOPE_COLUMNS]] for trace in traces]
         return np.hstack(parts)
 
+    def filter_state(self) -> dict | None:
+        """The LQG loop's Kalman filter (the one its regulator acts on)."""
+        state = self.simulations["LQG"].filter_state()
+        return state and {**state, "title": f"LQG loop: {state['title']}"}
+
     def status_message(self) -> str:
         return " ".join(f"{name} loop: {sim.status_message()}"
                         for name, sim in self.simulations.items() if sim.status != OK)

@@ -323,6 +323,11 @@ class SelfSensing(Exercise):
     worksheet = "self_sensing.md"
     parameters = PARAMETERS
     default_duration_s = 1.3       # one cycle 4 → 6 → 4 mm with 0.35 s holds and 0.3 s moves
+    no_feedback_loop = (
+        "The gap follows a prescribed trajectory (the ball is moved, not levitated): there is no "
+        "position loop for ISO 14839-3 to grade.  The per-period duty rule sets the next period's "
+        "flux from the model and the present flux (a one-period dead-beat, S = 1 − z⁻¹ whatever the "
+        "settings), so its margins would say nothing about the estimator.")
     charts = (
         Chart("Inductance", "mH", (
             Series("L̄ (eq. 18)", "inductance_mean_h", 1e3, "#d62728"),

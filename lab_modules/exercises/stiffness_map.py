@@ -48,6 +48,7 @@ from lab_modules.loops.axial_bearing_loop import (
     LoopSimulation,
     Segment,
     column,
+    loop_at_plant_input,
 )
 from lab_modules.parameters import Parameter
 from lab_modules.plants.axial_bearing import (
@@ -553,6 +554,11 @@ class StiffnessMap(Exercise):
                           + (" and weights" if values["fbfnn_train_weights"] == "on" else "")},
                 "adaline": {"regressor": "φ(i, x) [A²/mm²]", "weight": "k_Magnet [N·mm²/A²]",
                             "rate_mm4_per_a4": values["adaline_rate"]}}
+
+    def open_loops(self, values: dict) -> dict:
+        """The PID that holds the rotor at the centre (on the FBFNN filter's estimate), k_Magnet before its step."""
+        setup_ = loop_setup(values, networks(values))
+        return {f"PID on {setup_.feedback}": loop_at_plant_input(setup_)}
 
     def analyse(self, values: dict):
         ki, ks_mm = identified_tables(values)
