@@ -158,6 +158,11 @@ class Exercise:
     def metrics(self, values: dict, duration_s: float) -> dict:
         raise NotImplementedError
 
+    def parameter_ranges(self, values: dict) -> dict[str, tuple[float, float]]:
+        """Narrower (minimum, maximum) of parameters whose valid range depends on the other values,
+        e.g. on the loaded recording's length; the tab's sliders follow them."""
+        return {}
+
     def locus_matrices(self, values: dict, factors: tuple[float, ...]) -> tuple[list[np.ndarray], float | None]:
         """For ``locus``: the state matrices of that closed loop with the parameter at each of
         ``factors`` (the others as in ``values``) and their sample time [s] (None: continuous).

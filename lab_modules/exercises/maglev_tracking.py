@@ -230,9 +230,9 @@ class MaglevTracking(Exercise):
             ("Feedback gain k1", k[0], "1/s³"), ("Feedback gain k2", k[1], "1/s²"),
             ("Feedback gain k3", k[2], "1/s"),
             ("Equilibrium current at 14.8 mm (eq. 2.14)", current, "A"),
-            ("Equilibrium voltage R_c x3", TABLE_3_1.equilibrium_voltage_v(GAP_M), "V"),
-            ("Open-loop unstable pole √(2g/x0)", np.sqrt(2 * TABLE_3_1.gravity_m_per_s2 / GAP_M), "rad/s"),
-            ("Decoupling gain |1/L_gL_f²h| at x0", decoupling_gain_v_per_m_s3(GAP_M, current) * 1e3,
+            ("Equilibrium voltage at 14.8 mm", TABLE_3_1.equilibrium_voltage_v(GAP_M), "V"),
+            ("Open-loop unstable pole (linearised at 14.8 mm)", np.sqrt(2 * TABLE_3_1.gravity_m_per_s2 / GAP_M), "rad/s"),
+            ("Decoupling gain at 14.8 mm (eq. 2.17, inverted)", decoupling_gain_v_per_m_s3(GAP_M, current) * 1e3,
              "mV/(m/s³)"),
         ]
         chain = brunovsky_chain()

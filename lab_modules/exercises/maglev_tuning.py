@@ -109,13 +109,24 @@ def recording(values: dict) -> recordings.Recording:
     return shipped_recording() if data is None else data
 
 
+def still_range_s(rec: recordings.Recording) -> tuple[float, float]:
+    """Where a still segment can lie [s]: the recording's own time span, to the end of its last
+    sample interval (the sliders follow it)."""
+    step = float(np.median(np.diff(rec.time_s))) if len(rec) > 1 else 0.0
+    return float(rec.time_s[0]), round(float(rec.time_s[-1]) + step, 9)
+
+
 def sensor_noise_m(rec: recordings.Recording, values: dict) -> float:
     """Eq. 3.3: sigma² = E[(y - mu)²] over the still segment (sample mean mu)."""
-    still = rec.window(values["still_start_s"], values["still_end_s"])
+    start, end = values["still_start_s"], values["still_end_s"]
+    first, last = still_range_s(rec)
+    if not first <= start < end <= last + 1e-9:
+        raise ParameterError(f"still segment {start:g} ... {end:g} s: start and end must lie inside the "
+                             f"recording's {first:g} ... {last:g} s, start before end")
+    still = rec.window(start, end)
     if np.count_nonzero(still) < 10:
-        raise ParameterError(f"still segment {values['still_start_s']:g} ... {values['still_end_s']:g} s "
-                             f"holds {np.count_nonzero(still)} samples; choose a window with at least 10 "
-                             f"inside the recording's 0 ... {rec.time_s[-1]:g} s")
+        raise ParameterError(f"still segment {start:g} ... {end:g} s holds {np.count_nonzero(still)} samples; "
+                             f"choose a window with at least 10 inside the recording's {first:g} ... {last:g} s")
     return float(np.std(rec.measured_m[still]))
 
 
@@ -244,6 +255,11 @@ class MaglevTuning(Exercise):
             rec = recordings.parse(filename, content, min_rows=needed)        # raises, naming the last line
         return rec
 
+    def parameter_ranges(self, values: dict) -> dict[str, tuple[float, float]]:
+        """The still-segment sliders span the loaded recording, not the parameters' 0 ... 3600 s."""
+        first, last = still_range_s(recording(values))
+        return {"still_start_s": (first, last), "still_end_s": (first, last)}
+
     def model(self, values: dict) -> dict:
         rec = recording(values)
         return {"states": ["x1 gap [m]", "x2 velocity [m/s]", "x3 current [A]"], "inputs": ["u coil [V]"],
@@ -269,9 +285,10 @@ class MaglevTuning(Exercise):
             ("Sensor noise σ from the still segment (eq. 3.3)", sensor_noise_m(rec, values) * 1e3, "mm"),
             ("Q22 used by the filter", float(observed["Q"][1, 1]), "m²/s³"),
             ("Mean NIS", nis["mean"], ""),
-            ("Mean NIS 95 % bounds", nis["mean_bounds"][0], f"… {nis['mean_bounds'][1]:.3f}"),
+            ("Mean NIS, lower 95 % bound", nis["mean_bounds"][0], ""),
+            ("Mean NIS, upper 95 % bound", nis["mean_bounds"][1], ""),
             (f"{NIS_WINDOW}-sample NIS windows inside 95 % bounds", nis["within_percent"], "%"),
-            ("Innovation autocorrelation inside ±1.96/√N (lags 1-50)",
+            ("Innovation autocorrelation inside its 95 % white-noise bound (lags 1-50)",
              float(np.mean(np.abs(acf[1:]) <= bound) * 100.0), "%"),
             ("Final σ position", observed["x_sigma_m"][rows - 1] * 1e6 if rows else np.nan, "µm"),
             ("Final σ velocity", observed["velocity_sigma_m_per_s"][rows - 1] * 1e3 if rows else np.nan, "mm/s"),

@@ -435,7 +435,7 @@ class SensorPlacement(Exercise):
         sensor = "integrated capacitive" if integrated(values["sensor_offset_mm"]) else "eddy-current track"
         readouts = [(f"Natural frequency, mode {j + 1}", f, "Hz") for j, f in enumerate(frequencies)]
         readouts += [("Largest stable gain factor here", max_gain, "×"),
-                     ("Mode that goes unstable first", float(first_mode or 0), "mode #"),
+                     ("Mode that goes unstable first", f"mode {first_mode}" if first_mode else "none", ""),
                      ("Sensor noise σ (" + sensor + ")", sensor_noise_m(values) * 1e6, "µm")]
         for j in range(n):
             readouts += [(f"Mode {j + 1}: residue sign φ(actuator)·φ(sensor)", float(signs[j]), ""),
@@ -488,7 +488,9 @@ class SensorPlacement(Exercise):
         def explain() -> str:
             modes_s = mode_poles(closed, int(values["modes"]))
             if stable(closed):
-                return "The linear loop is stable: the reference step or the noise was too large."
+                return ("The linear loop is stable: the reference step (the PID's derivative kick on the "
+                        "step) or the noise was too large. Set the reference step to 0 to see the loop's own "
+                        "stability.")
             return (f"The loop is unstable: {unstable_mode_sentence(modes_s)}. "
                     "Move the sensor or change the gain, then reset.")
         return LoopSimulation(closed, simulation_inputs(values), values["disturbance_force_n"],
