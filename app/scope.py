@@ -24,6 +24,13 @@ import numpy as np
 import viser
 
 SHRINK_AFTER_S = 3.0          # a range three times too large for this long shrinks
+#: Frames (after the chart's first) at which the anchor widens the range for one frame.  uPlot lays
+#: out its axes only when a scale or its size changes; a chart laid out before its panel had a size
+#: (right after an exercise switch) kept blank axes, no tick labels at all, for as long as its range
+#: held still (seen on kalman_noise's current chart; issue 11, defect 13).  A one-frame blip of the
+#: range makes it lay them out again.
+RELAYOUT_FRAMES = (25, 75)
+RELAYOUT_WIDEN = 1.05
 HEADROOM = 1.2                # the range covers the traces with this factor
 PADDING = (12, 16, 0, 4)      # top, right, bottom, left [px]: the top tick label stays inside the chart
 Y_AXIS_SIZE = 56              # px for the y tick labels (five significant characters)
@@ -60,10 +67,19 @@ class StickyRange:
     def __init__(self) -> None:
         self.range: tuple[float, float] | None = None
         self.loose_since: float | None = None
+        self.frames = 0
+
+    def shown(self) -> tuple[float, float] | None:
+        """The range the anchor spans this frame: ``range``, widened for one of ``RELAYOUT_FRAMES``."""
+        if self.range is None or self.frames not in RELAYOUT_FRAMES:
+            return self.range
+        return (self.range[0] * RELAYOUT_WIDEN, self.range[1] * RELAYOUT_WIDEN) if self.range[0] < 0 < self.range[1] \
+            else (self.range[0] - 0.05 * (self.range[1] - self.range[0]), self.range[1])
 
     def update(self, columns: list[np.ndarray], now: float | None = None) -> bool:
         """Follow the traces; True if the range changed."""
         now = time.perf_counter() if now is None else now
+        self.frames += 1
         finite = np.concatenate([c[np.isfinite(c)] for c in columns]) if columns else np.zeros(0)
         if finite.size == 0:
             return False

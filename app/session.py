@@ -790,7 +790,7 @@ class LabSession:
         ys += [rows[:, column] * s.scale for s, column in zip(chart.series, columns)]
         x = t_ms.astype(np.float32) if _float32_resolves(t_ms, sample_time * 1e3) else t_ms
         y_range.update(ys)
-        ys.append(scope.anchor(y_range.range, len(t_ms)))
+        ys.append(scope.anchor(y_range.shown(), len(t_ms)))
         data = (x, *(y.astype(np.float32) for y in ys))
         # Straight to the wire: the handle's ``data`` setter would cast every column to float64.
         handle._impl.props.data = data

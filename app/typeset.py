@@ -35,7 +35,9 @@ def _escape_text(mathml: str) -> str:
 @functools.lru_cache(maxsize=4096)
 def mathml(latex: str, display: bool = False) -> str:
     """One formula as MathML on one line (``display``: a centred block)."""
-    markup = convert(latex.strip(), display="block" if display else "inline")
+    # latex2mathml sets a one-letter \mathrm{A} in italics (a multi-letter one upright): as text
+    latex = re.sub(r"\\mathrm\{(\w)\}", r"\\text{\1}", latex.strip())
+    markup = convert(latex, display="block" if display else "inline")
     markup = markup.replace(' xmlns="http://www.w3.org/1998/Math/MathML"', "").replace("\n", " ")
     return _escape_text(markup)
 
