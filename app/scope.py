@@ -24,13 +24,14 @@ import numpy as np
 import viser
 
 SHRINK_AFTER_S = 3.0          # a range three times too large for this long shrinks
-#: Frames (after the chart's first) at which the anchor widens the range for one frame.  uPlot lays
-#: out its axes only when a scale or its size changes; a chart laid out before its panel had a size
-#: (right after an exercise switch) kept blank axes, no tick labels at all, for as long as its range
-#: held still (seen on kalman_noise's current chart; issue 11, defect 13).  A one-frame blip of the
-#: range makes it lay them out again.
+#: Frames (after the chart's first) at which the chart's aspect ratio moves by ``RELAYOUT_STRETCH``
+#: (a fraction of a pixel), and back.  uPlot lays out its axes only when its size or a scale changes,
+#: and a scope's scales hold still (viser keeps them unless the x extent moves, which it never does
+#: here: see the module docstring).  A chart laid out before its panel had a size (seen right after
+#: a tab opened) kept blank axes, no tick labels at all, for good (kalman_noise's current chart;
+#: issue 11, defect 13); a size change makes uPlot lay them out again.
 RELAYOUT_FRAMES = (25, 75)
-RELAYOUT_WIDEN = 1.05
+RELAYOUT_STRETCH = 1e-3
 HEADROOM = 1.2                # the range covers the traces with this factor
 PADDING = (12, 16, 0, 4)      # top, right, bottom, left [px]: the top tick label stays inside the chart
 Y_AXIS_SIZE = 56              # px for the y tick labels (five significant characters)
@@ -69,12 +70,12 @@ class StickyRange:
         self.loose_since: float | None = None
         self.frames = 0
 
-    def shown(self) -> tuple[float, float] | None:
-        """The range the anchor spans this frame: ``range``, widened for one of ``RELAYOUT_FRAMES``."""
-        if self.range is None or self.frames not in RELAYOUT_FRAMES:
-            return self.range
-        return (self.range[0] * RELAYOUT_WIDEN, self.range[1] * RELAYOUT_WIDEN) if self.range[0] < 0 < self.range[1] \
-            else (self.range[0] - 0.05 * (self.range[1] - self.range[0]), self.range[1])
+    def relayout_aspect(self, aspect: float) -> float | None:
+        """The chart's aspect ratio to send this frame (None: leave it): stretched at the first
+        of ``RELAYOUT_FRAMES``, back at the second."""
+        if self.frames == RELAYOUT_FRAMES[0]:
+            return aspect * (1 + RELAYOUT_STRETCH)
+        return aspect if self.frames == RELAYOUT_FRAMES[1] else None
 
     def update(self, columns: list[np.ndarray], now: float | None = None) -> bool:
         """Follow the traces; True if the range changed."""

@@ -20,7 +20,7 @@ from latex2mathml.converter import convert
 #: closing one (so "$5 and $6" stays text).
 _TOKENS = re.compile(r"(?P<code>```.*?```|`[^`\n]*`)"
                      r"|\$\$(?P<display>.+?)\$\$"
-                     r"|(?<![\\$\w])\$(?P<inline>[^\s$](?:[^$\n]*?[^\s$\\])?)\$(?![\w$])", re.S)
+                     r"|(?<![\\$\w])\$(?P<inline>[^\s$](?:[^$\n]*?[^\s$\\])?)\$(?![\w$])", re.DOTALL)
 #: characters that mean something to Markdown (or a GFM table) inside the MathML's text
 _MARKDOWN_SPECIAL = re.compile(r"[\\`*_{}\[\]|~$]")
 
