@@ -24,14 +24,14 @@ import numpy as np
 import viser
 
 SHRINK_AFTER_S = 3.0          # a range three times too large for this long shrinks
-#: Frames (after the chart's first) at which the chart's aspect ratio moves by ``RELAYOUT_STRETCH``
-#: (a fraction of a pixel), and back.  uPlot lays out its axes only when its size or a scale changes,
-#: and a scope's scales hold still (viser keeps them unless the x extent moves, which it never does
-#: here: see the module docstring).  A chart laid out before its panel had a size (seen right after
-#: a tab opened) kept blank axes, no tick labels at all, for good (kalman_noise's current chart;
-#: issue 11, defect 13); a size change makes uPlot lay them out again.
-RELAYOUT_FRAMES = (25, 75)
-RELAYOUT_STRETCH = 1e-3
+#: For its first frames a scope shows a range this much wider than the traces need, then the
+#: range itself.  uPlot lays out a chart's axes when a scale changes; a chart whose scale was set
+#: before its panel had a size (right after a tab opened or an exercise switch) kept blank axes, no
+#: tick labels at all, for as long as its range held still, and a later resize did not help (seen on
+#: kalman_noise's and ekf_parameters' current charts; issue 11, defect 13).  The one planned change
+#: of range lays the axes out again once the chart has its size.
+SETTLE_FRAMES = 50
+SETTLE_WIDEN = 1.5
 HEADROOM = 1.2                # the range covers the traces with this factor
 PADDING = (12, 16, 0, 4)      # top, right, bottom, left [px]: the top tick label stays inside the chart
 Y_AXIS_SIZE = 56              # px for the y tick labels (five significant characters)
@@ -70,12 +70,14 @@ class StickyRange:
         self.loose_since: float | None = None
         self.frames = 0
 
-    def relayout_aspect(self, aspect: float) -> float | None:
-        """The chart's aspect ratio to send this frame (None: leave it): stretched at the first
-        of ``RELAYOUT_FRAMES``, back at the second."""
-        if self.frames == RELAYOUT_FRAMES[0]:
-            return aspect * (1 + RELAYOUT_STRETCH)
-        return aspect if self.frames == RELAYOUT_FRAMES[1] else None
+    def shown(self) -> tuple[float, float] | None:
+        """The range the anchor spans this frame: ``range``, widened for the first ``SETTLE_FRAMES``."""
+        if self.range is None or self.frames >= SETTLE_FRAMES:
+            return self.range
+        low, high = self.range
+        if low < 0 < high:
+            return (low * SETTLE_WIDEN, high * SETTLE_WIDEN)
+        return (low - (SETTLE_WIDEN - 1) * (high - low), high)
 
     def update(self, columns: list[np.ndarray], now: float | None = None) -> bool:
         """Follow the traces; True if the range changed."""

@@ -810,13 +810,11 @@ class LabSession:
         ys += [rows[:, column] * s.scale for s, column in zip(chart.series, columns)]
         x = t_ms.astype(np.float32) if _float32_resolves(t_ms, sample_time * 1e3) else t_ms
         y_range.update(ys)
-        ys.append(scope.anchor(y_range.range, len(t_ms)))
+        ys.append(scope.anchor(y_range.shown(), len(t_ms)))
         data = (x, *(y.astype(np.float32) for y in ys))
         # Straight to the wire: the handle's ``data`` setter would cast every column to float64.
         handle._impl.props.data = data
         handle._queue_update("data", data)
-        if (aspect := y_range.relayout_aspect(SCOPE_ASPECT)) is not None:
-            handle.aspect = aspect
 
 
 def _scope_rows(buffer: np.ndarray, columns: list[int], sample_time_s: float,
