@@ -53,6 +53,7 @@ def test_every_formula_of_the_worksheet_converts(exercise):
         markup = mathml(latex, display)
         assert markup.startswith("<math") and markup.endswith("</math>"), latex
         assert not re.search(r">[^<]*\\[a-zA-Z]", markup), f"{exercise.name}: unknown command left in {latex!r}"
+        assert ">&<" not in markup, f"{exercise.name}: an '&' shown as text (environment not supported) in {latex!r}"
 
 
 def test_typeset_leaves_code_prices_and_escaped_dollars_alone():
