@@ -16,25 +16,31 @@ from lab_modules.exercises import Analysis, Exercise, Plot
 
 COLORS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd")
 ZONE_COLORS = ("#2ca02c", "#ff7f0e", "#d62728")     # the A/B, B/C and C/D limits
+#: Frequencies the margins are searched on (the plots use fewer): dense enough that the lightly
+#: damped bending modes of ``sensor_placement`` cannot slip between two points.
+MARGIN_GRID_POINTS = 3000
 
 
 def margin_view(exercise: Exercise, values: dict) -> tuple[list, list[Plot], list[str]]:
     """Readouts, plots and notes of the exercise's open loops (empty if it has none)."""
     loops = exercise.open_loops(values)
     if not loops:
-        return [], [], []
-    omega = analysis.frequency_grid(next(iter(loops.values())), points=400)
+        return [], [], ([exercise.no_feedback_loop] if exercise.no_feedback_loop else [])
+    found = {name: analysis.loop_margins(loop, analysis.frequency_grid(loop, points=MARGIN_GRID_POINTS))
+             for name, loop in loops.items()}
+    # the plots' grid, plus each loop's |S| peak and crossover: a narrow resonance peak is drawn at its height
+    extra = [w for m in found.values() for w in (m.sensitivity_peak_rad_s, m.gain_crossover_rad_s) if np.isfinite(w)]
+    omega = np.unique(np.concatenate([analysis.frequency_grid(next(iter(loops.values())), points=400), extra]))
     readouts, magnitude, phase, sens, notes = [], [], [], [], []
     for (name, loop), color in zip(loops.items(), COLORS):
-        m = analysis.loop_margins(loop, omega)
+        m = found[name]
         L = analysis.open_loop_response(loop, omega)
-        if np.isfinite(m.gain_margin):
-            readouts.append((f"{name}: gain margin up", m.gain_margin, "×"))
-        else:
+        readouts += _margin_readouts(name, m)
+        if not np.isfinite(m.gain_margin):
             notes.append(f"{name}: the phase of L never crosses −180° above the loop's gain: no upper gain margin.")
-        readouts += [(f"{name}: gain margin down", m.gain_margin_down, "×"),
-                     (f"{name}: phase margin", m.phase_margin_deg, "°"),
-                     (f"{name}: |S|max (zone {m.zone} of ISO 14839-3)", m.sensitivity_peak, "×")]
+        if not m.stable:
+            notes.append(f"{name}: the closed loop is unstable at these settings (zone D); the gain margins "
+                         "say by which factor the loop gain would have to change to cross the stability edge.")
         magnitude.append((f"|L| {name}", np.abs(L), color))
         phase.append((f"arg L {name}", np.degrees(np.unwrap(np.angle(L))), color))
         sens.append((f"|S| {name}", 1.0 / np.abs(1.0 + L), color))
@@ -46,10 +52,31 @@ def margin_view(exercise: Exercise, values: dict) -> tuple[list, list[Plot], lis
              "|L| [1]", f_hz, tuple(magnitude) + (("|L| = 1", np.ones(len(f_hz)), "#7f7f7f"),),
              log_x=True, log_y=True),
         Plot("Open loop L at the plant input: phase", "frequency [Hz]", "arg L [°]", f_hz, tuple(phase), log_x=True),
-        Plot("Sensitivity |S| = 1/|1 + L| with the ISO 14839-3 zone limits", "frequency [Hz]", "|S| [1]", f_hz,
+        Plot("Sensitivity |S| = 1/|1 + L|, ISO 14839-3 zones A < 3 (9.5 dB) < B < 4 (12 dB) < C < 5 (14 dB) < D",
+             "frequency [Hz]", "|S| [1]", f_hz,
              tuple(sens) + limits, log_x=True),
     ]
     return readouts, plots, notes
+
+
+def _decibels(factor: float) -> float:
+    return float(20.0 * np.log10(factor)) if factor > 0 else -np.inf
+
+
+def _margin_readouts(name: str, m: analysis.Margins) -> list[tuple[str, float, str]]:
+    """Gain margins as factors and in dB, phase margin, gain crossover, |S|max and its ISO zone."""
+    rows = []
+    if np.isfinite(m.gain_margin):
+        rows += [(f"{name}: gain margin up", m.gain_margin, "×"),
+                 (f"{name}: gain margin up", _decibels(m.gain_margin), "dB")]
+    if m.gain_margin_down > 0:
+        rows += [(f"{name}: gain margin down", m.gain_margin_down, "×"),
+                 (f"{name}: gain margin down", _decibels(m.gain_margin_down), "dB")]
+    rows += [(f"{name}: phase margin", m.phase_margin_deg, "°"),
+             (f"{name}: gain crossover frequency", m.gain_crossover_rad_s / (2 * np.pi), "Hz"),
+             (f"{name}: |S|max, ISO 14839-3 zone {m.zone}", m.sensitivity_peak, "×"),
+             (f"{name}: |S|max, ISO 14839-3 zone {m.zone}", _decibels(m.sensitivity_peak), "dB")]
+    return rows
 
 
 def with_margins(result: Analysis, margins: tuple[list, list, list]) -> Analysis:

@@ -27,8 +27,10 @@ from pathlib import Path
 import numpy as np
 import viser
 
-from app import layout, margins, scope, worksheets
+from app import export, inspector, layout, margins, pole_map, scope, worksheets
 from app.access import token_matches
+from app.actions import ActionPanel
+from app.live import LivePlots, SpeedMeter
 from app.store import Store, StoreError
 from app.traffic import callback
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, registry
@@ -48,7 +50,6 @@ SCOPE_BUCKETS = 75                # per chart and frame: the extremes of the rou
                                   # time buckets, i.e. <= 150 points across the ~500 px plot (see _scope_rows)
 ROUGHNESS_ROWS = 200              # newest rows that decide which series is the roughest
 SCOPE_ROWS = 20_000               # most samples the scope keeps
-POLE_COLORS = ("#7f7f7f", "#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e")
 CONTROL_WIDTH_PX = 380            # the docked controls (left)
 PANEL_WIDTH_PX = 600              # the docked charts (right); of 1366 px, 386 stay for the 3D view and the
                                   # notifications (which open there and would otherwise cover the panel's tabs)
@@ -63,7 +64,6 @@ NUMBER_BOX_HINT = ("*Number boxes: 0.5 or 0,5; a value beyond a slider's ends (i
                    "box changes nothing.*")
 PANEL_TABS = (("Scope", viser.Icon.WAVE_SINE), ("Pole map", viser.Icon.CHART_DOTS),
               ("Analysis", viser.Icon.CHART_LINE), ("Worksheet", viser.Icon.NOTEBOOK))
-LIGHT_DAMPING = 0.3               # poles below this damping always belong to the dominant view
 AUTOSAVE_AFTER_S = 1.0            # a tab's autosave is written this long after its last change
 TOKEN_ATTEMPTS = 5                # wrong class tokens before a tab is disconnected
 TOKEN_RETRY_S = 1.0               # a wrong token waits this long before the next try
@@ -108,6 +108,11 @@ def escaped(text) -> str:
 def _with_range(parameter: Parameter) -> str:
     """A number control's hint: its description and its valid range."""
     return f"{parameter.description.rstrip('.')}. Range: {parameter.valid_range().replace('...', '…')}."
+
+
+def _cell(text: str) -> str:
+    """A readout's label or unit as one Markdown table cell: "|S|max" must not end the cell."""
+    return str(text).replace("|", "\\|")
 
 
 def _format(value: float) -> str:
@@ -270,7 +275,7 @@ class LabSession:
             self.columns = {name: 1 + i for i, name in enumerate(simulation.columns)}
             self.buffer = np.empty((0, 1 + len(self.columns)))
         self.recording = recording
-        self.shown_poles: dict[str, np.ndarray] | None = None
+        self.shown_poles: pole_map.PoleView | None = None
         self.shown_analysis: Analysis | None = None   # the last analysis shown, redrawn with fresh scope readouts
         self.scene = exercise.scene(self.values)
         self._build_gui()
@@ -397,6 +402,9 @@ class LabSession:
         self.status = gui.add_markdown("**Running**")
         buttons = gui.add_button_group("Simulation", ("Run", "Pause", "Reset"))
         buttons.on_click(self._on("buttons", lambda: self._on_button(buttons.value)))
+        self.speed, self.speed_meter = gui.add_markdown(""), SpeedMeter()   # filled in while it runs
+        inspector.add_controls(self)                  # step one sample, the filter's numbers (app/inspector.py)
+        self.action_panel = ActionPanel(self, gui, _plot_chart)   # the exercise's buttons, if any
         if self.scene is not None:
             refresh = gui.add_dropdown("3D view", tuple(SCENE_REFRESH), initial_value=self.scene_refresh,
                                        hint="How often the 3D view follows the simulation. Smooth motion needs "
@@ -452,21 +460,26 @@ class LabSession:
         beside = self.beside
         with self.tabs["Scope"]:
             self.window_ms = self._window_rows() * self.simulation.sample_time_s * 1e3
+            self.live = LivePlots(gui, self.exercise, self.simulation)   # if the exercise has any
             self.y_ranges = [scope.StickyRange() for _ in self.exercise.charts]
             self.charts = [self._add_chart(chart) for chart in self.exercise.charts]
             self.readouts = gui.add_markdown("*computing …*")
+            export.add_buttons(self)                  # CSV and PNG for a lab report (app/export.py)
         with self.tabs["Pole map"]:
-            dominant, full = _pole_charts(first.poles)
-            self.pole_plots = tuple(gui.add_uplot(data, **options, aspect=1.6) for data, options in (dominant, full))
+            self.shown_poles = pole_map.view(self.exercise, dict(self.values), first.poles)
+            self.pole_plots = tuple(gui.add_uplot(data, **options, aspect=1.6)
+                                    for data, options in pole_map.charts(self.shown_poles))
+            gui.add_markdown(pole_map.legend_markdown())
             gui.add_markdown("Poles in the s-plane (discrete poles mapped by s = ln z / T); the dashed line is "
                              "the imaginary axis, right of it is unstable. The first map leaves out the fast, "
                              "well-damped poles (sensor lag, amplifier) that squash the second.")
-            self.pole_table = gui.add_markdown("")
+            self.pole_table = gui.add_markdown(pole_map.table_markdown(first.poles))
         with self.tabs["Analysis"]:
-            self.plots = []
+            self.plots, self.plot_shapes = [], []
             for plot in first.plots:
                 data, options = _plot_chart(plot)
                 self.plots.append(gui.add_uplot(data, **options, aspect=2.0))
+                self.plot_shapes.append(_plot_shape(plot))
             if not first.plots:
                 gui.add_markdown("*This exercise has no analysis plots.*")
         worksheet = worksheets.current(self.exercise)    # claims table filled in as it is measured
@@ -553,7 +566,10 @@ class LabSession:
             if parameter.name == "seed" or self.simulation.status_message():
                 self._reset()                         # a stopped run is not carried on (it touched down)
             else:
+                step_s = self.simulation.sample_time_s
                 self.simulation = self.exercise.retune(self.simulation, self.values)
+                if self.simulation.sample_time_s != step_s:
+                    self.buffer = self.buffer[:0]     # the scope's rows assume one sample time
         if self.scene is not None:
             try:
                 self.scene.update(dict(self.values))
@@ -604,6 +620,9 @@ class LabSession:
                 self._start_simulation_thread()       # never left without a simulation
             self.problems.clear()
             self.status.content = "**Running**" if self.running else "**Paused**"
+            if not self.running:
+                self.speed.content = ""
+            inspector.refresh(self)
 
     def _reset(self) -> None:
         self.simulation = self.exercise.simulation(self.values)
@@ -650,6 +669,29 @@ class LabSession:
                         self.shown_analysis = None        # the message stays until an analysis succeeds
                         self.readouts.content = f"⚠️ The analysis failed at these settings: {error}"
 
+    def _update_plots(self, plots) -> None:
+        """The Analysis tab's charts show ``plots`` (call holding ``gui_lock``).  A later result of
+        ``analyse`` (or the margins appended after it) may hold more, fewer or other plots than the
+        first: a chart whose plot changed gets its series, axes and title too, not only the data
+        (else its legend and log axes belong to another plot); missing charts are added at the end."""
+        for k, plot in enumerate(plots):
+            data, options = _plot_chart(plot)
+            if k >= len(self.plots):
+                with self.tabs["Analysis"]:
+                    self.plots.append(self.client.gui.add_uplot(data, **options, aspect=2.0))
+                self.plot_shapes.append(_plot_shape(plot))
+            elif self.plot_shapes[k] == _plot_shape(plot):
+                self.plots[k].data, self.plots[k].scales = data, options["scales"]
+            else:
+                with self.client.atomic():            # series, axes and data change together
+                    handle = self.plots[k]
+                    handle.series, handle.axes, handle.data = options["series"], options["axes"], data
+                    handle.scales, handle.title = options["scales"], options["title"]
+                self.plot_shapes[k] = _plot_shape(plot)
+        for handle in self.plots[len(plots):]:
+            handle.remove()
+        del self.plots[len(plots):], self.plot_shapes[len(plots):]
+
     def _show(self, generation: int, result: Analysis) -> bool:
         """Show an analysis; False if the tab no longer shows its exercise."""
         with self.gui_lock:
@@ -658,24 +700,29 @@ class LabSession:
             self.shown_analysis = result
             self.readouts.content = self._readouts_markdown(result)
             self.client.flush()                       # the readouts go out now, not with the next window
-            if not _same_poles(result.poles, self.shown_poles):
-                self.shown_poles = result.poles
-                for handle, (data, options) in zip(self.pole_plots, _pole_charts(result.poles)):
-                    handle.data, handle.scales, handle.title = data, options["scales"], options["title"]
-                self.pole_table.content = _pole_table(result.poles)
-            for handle, plot in zip(self.plots, result.plots):
-                data, options = _plot_chart(plot)
-                handle.data, handle.scales = data, options["scales"]
+            self._update_plots(result.plots)
+            exercise, values = self.exercise, dict(self.values)
+        poles = pole_map.view(exercise, values, result.poles)   # the root locus: cached per setting
+        with self.gui_lock:
+            if not self._current(generation):
+                return False
+            if not poles.same_as(self.shown_poles):
+                self.shown_poles = poles
+                with self.client.atomic():            # series, axes and data change together
+                    for handle, (data, options) in zip(self.pole_plots, pole_map.charts(poles)):
+                        handle.series, handle.axes, handle.data = options["series"], options["axes"], data
+                        handle.scales, handle.title = options["scales"], options["title"]
+                    self.pole_table.content = pole_map.table_markdown(result.poles)
         return True
 
     def _readouts_markdown(self, result: Analysis) -> str:
         """The readouts table: the analysis's figures, then the exercise's figures of the scope window."""
         lines = ["| quantity | value | unit |", "|---|---:|---|"]
-        lines += [f"| {label} | {_format(value)} | {unit} |" for label, value, unit in result.readouts]
+        lines += [f"| {_cell(label)} | {_format(value)} | {_cell(unit)} |" for label, value, unit in result.readouts]
         with self.lock:
             trace = {name: self.buffer[:, column] for name, column in self.columns.items()}
         if len(next(iter(trace.values()), ())) >= 10:
-            lines += [f"| {label} (scope window) | {_format(value)} | {unit} |"
+            lines += [f"| {_cell(label)} (scope window) | {_format(value)} | {_cell(unit)} |"
                       for label, value, unit in self.exercise.live_readouts(trace)]
         return "\n".join(lines) + "\n\n" + "\n\n".join(f"*{n}*" for n in result.notes)
 
@@ -701,7 +748,6 @@ class LabSession:
     def _run(self, generation: int) -> None:
         """The simulation thread: an error in one frame is reported and the next frame goes on."""
         carry, last, next_scene, next_readouts = 0.0, time.perf_counter(), 0.0, 0.0
-        T = self.simulation.sample_time_s
         next_frame = last
         while self._current(generation):
             next_frame += FRAME_S                     # a steady frame rate: the frame's own work is not added
@@ -715,12 +761,12 @@ class LabSession:
             now = time.perf_counter()
             elapsed, last = now - last, now
             try:
-                carry, next_scene, next_readouts = self._frame(generation, now, elapsed, T, carry,
+                carry, next_scene, next_readouts = self._frame(generation, now, elapsed, carry,
                                                                next_scene, next_readouts)
             except Exception as error:  # noqa: BLE001 - reported; the next frame goes on
                 self._problem("simulation", error)
 
-    def _frame(self, generation: int, now: float, elapsed: float, T: float, carry: float,
+    def _frame(self, generation: int, now: float, elapsed: float, carry: float,
                next_scene: float, next_readouts: float) -> tuple[float, float, float]:
         """One display frame: advance, draw, 3D view; returns the carried state."""
         period = SCENE_REFRESH[self.scene_refresh]
@@ -736,9 +782,11 @@ class LabSession:
             if not self.running:
                 return carry, next_scene, next_readouts
             time_scale = self.values.get("time_scale", 1.0)
-            carry += time_scale * elapsed / T
+            carry += time_scale * elapsed / self.simulation.sample_time_s   # a retune may change it
             steps, carry = int(carry), carry - int(carry)
+            started = time.thread_time()
             trace = self.simulation.advance(steps)
+            self.speed_meter.add(steps * self.simulation.sample_time_s, time.thread_time() - started, elapsed)
             window = self._window_rows()
             self.buffer = np.concatenate([self.buffer, trace])[-window:]
             message = self.simulation.status_message()
@@ -749,8 +797,10 @@ class LabSession:
             if not self._current(generation):
                 return carry, next_scene, next_readouts
             self._draw()
+            self.live.draw(self.simulation, now, getattr(self, "drawn_until", None))
             if now >= next_readouts:
                 self._refresh_live_readouts()
+                self.speed.content = self.speed_meter.text()
                 next_readouts = now + LIVE_READOUT_PERIOD_S
             if message and self.simulation is stopped and not self.running:   # not reset meanwhile
                 self.status.content = f"**Stopped: {message}** Press Run or Reset to start again."
@@ -864,6 +914,12 @@ def _float32_resolves(t_ms: np.ndarray, step_ms: float) -> bool:
     return bool(np.spacing(np.float32(np.abs(t_ms).max())) <= step_ms / 16)
 
 
+def _plot_shape(plot: Plot) -> tuple:
+    """What a chart keeps between data updates: title, axes, series and their scales."""
+    return (plot.title, plot.x_label, plot.y_label, plot.log_x, plot.log_y, plot.points,
+            tuple((label, color) for label, _, color in plot.series))
+
+
 def _plot_chart(plot: Plot) -> tuple[tuple, dict]:
     """uPlot arguments of a static analysis plot.  uPlot cannot range over
     NaN gaps, so the y scale gets an explicit range from the finite data."""
@@ -880,72 +936,6 @@ def _plot_chart(plot: Plot) -> tuple[tuple, dict]:
         "axes": (viser.uplot.Axis(label=plot.x_label), viser.uplot.Axis(label=plot.y_label)),
         "scales": {"x": viser.uplot.Scale(time=False, **(LOG_SCALE if plot.log_x else {})),
                    "y": viser.uplot.Scale(auto=False, **(LOG_SCALE | _log_span(*ys) if plot.log_y else _span(*ys)))}}
-
-
-def dominant_decay_rad_s(poles: dict[str, np.ndarray]) -> float:
-    """Decay rate |Re s| up to which a pole counts as dominant: twice the median
-    decay rate, which leaves out the sensor-lag and amplifier poles (thousands
-    of rad/s) that squash the real axis, but keeps the rotor, controller and
-    filter poles around them."""
-    decay = np.abs(np.concatenate([np.asarray(p, dtype=complex) for p in poles.values()] or [np.zeros(0)]).real)
-    return 2.0 * float(np.median(decay)) if decay.size else np.inf
-
-
-def _pole_charts(poles: dict[str, np.ndarray]) -> tuple[tuple[tuple, dict], tuple[tuple, dict]]:
-    """uPlot arguments of the two pole maps: the dominant poles (slow, or lightly
-    damped: |Re s| below ``dominant_decay_rad_s`` or damping below
-    ``LIGHT_DAMPING``) and all poles."""
-    limit = dominant_decay_rad_s(poles)
-
-    def dominant(p: np.ndarray) -> np.ndarray:
-        damping = -p.real / np.maximum(np.abs(p), 1e-300)
-        return p[(np.abs(p.real) <= limit) | (damping < LIGHT_DAMPING)]
-
-    chosen = {name: dominant(np.asarray(p, dtype=complex)) for name, p in poles.items()}
-    return (_pole_map(chosen, f"Dominant poles (Re s > −{limit:.0f} rad/s or damping ζ < {LIGHT_DAMPING})"),
-            _pole_map(poles, "All poles"))
-
-
-def _pole_map(poles: dict[str, np.ndarray], title: str) -> tuple[tuple, dict]:
-    """A pole map as a scatter plot over one shared, sorted real axis (each pole
-    set a series with gaps where the others have their poles), with the
-    imaginary axis drawn as a dashed line between two extra rows at Re s = 0."""
-    points = sorted((p.real, p.imag, index) for index, ps in enumerate(poles.values()) for p in ps)
-    imag = np.array([p[1] for p in points])
-    reach = float(np.abs(imag).max()) if imag.size else 0.0
-    if reach == 0.0:                                  # all poles real: a square-ish view of the real axis
-        reach = 0.5 * max((abs(p[0]) for p in points), default=1.0) or 1.0
-    reach *= 1.1
-    points += [(0.0, -reach, -1), (0.0, reach, -1)]
-    points.sort(key=lambda p: p[0])
-    x = np.array([p[0] for p in points])
-    columns = [np.full(len(x), np.nan) for _ in range(len(poles) + 1)]
-    for row, (_, value, which) in enumerate(points):
-        columns[which][row] = value                   # which = -1: the imaginary axis, the last column
-    series = (viser.uplot.Series(label="Re s [rad/s]"),) + tuple(
-        viser.uplot.Series(label=name, stroke=color, width=0,
-                           points=viser.uplot.Series_Points(show=True, size=8, fill=color, stroke=color))
-        for name, color in zip(poles, itertools.cycle(POLE_COLORS))) + (
-        viser.uplot.Series(label="Re s = 0", stroke="#000000", width=1, dash=(6.0, 4.0),
-                           points=viser.uplot.Series_Points(show=False)),)
-    return (x, *columns), {
-        "series": series, "title": title, "legend": viser.uplot.Legend(live=False), "padding": scope.PADDING,
-        "axes": (viser.uplot.Axis(label="Re s [rad/s]"), viser.uplot.Axis(label="Im s [rad/s]")),
-        "scales": {"x": viser.uplot.Scale(time=False),
-                   "y": viser.uplot.Scale(auto=False, min=-1.05 * reach, max=1.05 * reach)}}
-
-
-def _same_poles(a: dict[str, np.ndarray], b: dict[str, np.ndarray] | None) -> bool:
-    return b is not None and a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)
-
-
-def _pole_table(poles: dict[str, np.ndarray]) -> str:
-    rows = ["| set | Re s [rad/s] | Im s [rad/s] | damping ζ |", "|---|---:|---:|---:|"]
-    for name, set_poles in poles.items():
-        for pole in sorted((p for p in set_poles if p.imag >= 0), key=lambda p: -p.real):
-            zeta = -pole.real / abs(pole) if abs(pole) > 0 else 1.0
-            rows.append(f"| {name} | {pole.real:.0f} | {pole.imag:.0f} | {zeta:.2f} |")
-    return "\n".join(rows)
 
 
 def _log_span(*arrays: np.ndarray) -> dict[str, float]:

@@ -10,6 +10,8 @@ functions (poles, step responses) apply directly.
 
 from __future__ import annotations
 
+import threading
+import warnings
 from dataclasses import dataclass
 
 import control
@@ -30,10 +32,25 @@ def steady_state_kalman(model: control.StateSpace, Q, R):
     returned K is eq. 2's correction gain P C^T (C P C^T + R)^-1, not the
     predictor gain A K that ``dlqe`` itself returns.
     """
-    A, C = np.asarray(model.A), np.asarray(model.C)
-    _, P, _ = control.dlqe(A, np.eye(A.shape[0]), C, Q, R)
-    K = P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
-    return K, P
+    A, C, Q, R = (np.ascontiguousarray(M, dtype=float) for M in (model.A, model.C, Q, R))
+    key = tuple((M.shape, M.tobytes()) for M in (A, C, Q, R))
+    with _kalman_lock:
+        cached = _kalman_cache.get(key)
+    if cached is None:
+        _, P, _ = control.dlqe(A, np.eye(A.shape[0]), C, Q, R)
+        cached = (P @ C.T @ np.linalg.inv(C @ P @ C.T + R), P)
+        with _kalman_lock:                        # the analysis threads of all tabs share it
+            _kalman_cache[key] = cached
+            while len(_kalman_cache) > KALMAN_CACHE:
+                _kalman_cache.pop(next(iter(_kalman_cache)))
+    return cached[0].copy(), cached[1].copy()
+
+
+#: Riccati solutions kept (the analysis, the pole map's root locus and the sweeps of one
+#: setting ask for the same filter; a solve takes milliseconds)
+KALMAN_CACHE = 64
+_kalman_cache: dict = {}
+_kalman_lock = threading.Lock()
 
 
 @dataclass(frozen=True)
@@ -314,6 +331,19 @@ def loop_at_plant_input(model: control.StateSpace, compensator_system: control.S
     return -control.series(plant_u, compensator_system)
 
 
+def state_space_from_step(step, n_states: int, n_inputs: int, dt: float) -> control.StateSpace:
+    """The discrete linear system x+ = A x + B u, y = C x + D u that ``step(x, u) -> (x+, y)``
+    computes, by pushing unit vectors through one step (the step must be linear in (x, u)).
+    Lets a loop written like its compiled kernel give its own linear model."""
+    columns = [step(e, np.zeros(n_inputs)) for e in np.eye(n_states)]
+    inputs = [step(np.zeros(n_states), e) for e in np.eye(n_inputs)]
+    A = np.column_stack([c[0] for c in columns]) if n_states else np.zeros((0, 0))
+    B = np.column_stack([c[0] for c in inputs]).reshape(n_states, n_inputs)
+    D = np.column_stack([c[1] for c in inputs])
+    C = np.column_stack([c[1] for c in columns]) if n_states else np.zeros((D.shape[0], 0))
+    return control.ss(A, B, C, D, dt)
+
+
 def iso_zone(peak: float) -> str:
     """ISO 14839-3 zone of a sensitivity peak |S|max: A < 3, B < 4, C < 5, D above."""
     return next(zone for zone, limit in ISO_14839_ZONES if peak < limit)
@@ -346,8 +376,19 @@ def frequency_grid(system, points: int = 800, low_rad_s: float = 1.0) -> np.ndar
 
 
 def open_loop_response(open_loop, omega) -> np.ndarray:
-    """L(jω) (or L(e^{jωT})) of a SISO system on ``omega`` [rad/s]."""
-    return np.asarray(np.squeeze(control.frequency_response(open_loop, np.atleast_1d(omega)).complex))
+    """L(jω) (or L(e^{jωT})) of a SISO system on ``omega`` [rad/s]: for a state space one batched
+    solve of (zI - A) x = B (what python-control's ``frequency_response`` returns, without its
+    per-call overhead: the margin search evaluates single frequencies many times)."""
+    if not isinstance(open_loop, control.StateSpace):
+        return np.asarray(np.squeeze(control.frequency_response(open_loop, np.atleast_1d(omega)).complex))
+    A, B, C, D = (np.asarray(M, dtype=float) for M in (open_loop.A, open_loop.B, open_loop.C, open_loop.D))
+    w = np.atleast_1d(np.asarray(omega, dtype=float))
+    z = np.exp(1j * w * open_loop.dt) if open_loop.dt else 1j * w
+    if A.shape[0] == 0:
+        return np.squeeze(np.full(w.shape, D[0, 0], dtype=complex))
+    with np.errstate(all="ignore"):
+        x = np.linalg.solve(z[:, None, None] * np.eye(A.shape[0]) - A, np.broadcast_to(B[:, :1], (w.size,) + B[:, :1].shape))
+    return np.squeeze(x[..., 0] @ C[0] + D[0, 0])
 
 
 def _roots(f, omega: np.ndarray, values: np.ndarray) -> list[float]:
@@ -371,6 +412,14 @@ def loop_margins(open_loop, omega: np.ndarray | None = None) -> Margins:
     for w in _roots(lambda w: at(w).imag, omega, L.imag):
         value = at(w)
         if value.real < 0:
+            gains.append(1.0 / abs(value))
+    # L is real at ω = 0 (and at the Nyquist frequency of a discrete loop): a crossing there
+    # (an unstable plant under a loop without integrator: the lower gain margin) has no sign change
+    for point in ((1.0, -1.0) if open_loop.dt else (0.0,)):
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore")              # singular at z = 1 for a loop with an integrator
+            value = complex(np.squeeze(open_loop(point)))
+        if np.isfinite(value) and value.real < 0 and abs(value.imag) <= 1e-9 * abs(value):
             gains.append(1.0 / abs(value))
     phase_margins = [(float(np.degrees(np.angle(-at(w)))), w)
                      for w in _roots(lambda w: abs(at(w)) - 1.0, omega, np.abs(L) - 1.0)]

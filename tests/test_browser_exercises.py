@@ -147,7 +147,7 @@ def test_every_exercise_in_one_tab(open_tab, lab_server):
         _readable_charts(page, exercise.name)
         tab.open_panel_tab("Pole map")
         page.get_by_text("dominant poles", exact=False).first.wait_for(timeout=10000)
-        page.locator("table").filter(has_text="Im s [rad/s]").first.wait_for(timeout=10000)
+        page.locator("table").filter(has_text="f_n [Hz]").first.wait_for(timeout=10000)
         assert not _clipped(page), (exercise.name, _clipped(page))
         _readable_charts(page, exercise.name)
         if page.get_by_role("tab", name="Analysis").count():

@@ -21,7 +21,7 @@ def test_thrust_liftoff_views_and_unstable_kp(open_tab, lab_server):
     page.get_by_text("Bias current i0", exact=False).first.wait_for(timeout=20000)
     page.get_by_text("Noise-free overshoot, raw PID", exact=False).first.wait_for(timeout=20000)
     tab.open_panel_tab("Pole map")
-    page.locator("table:visible").filter(has_text="Im s [rad/s]").first.wait_for(timeout=10000)
+    page.locator("table:visible").filter(has_text="f_n [Hz]").first.wait_for(timeout=10000)
     tab.open_panel_tab("Analysis")
     page.locator(".uplot:visible").first.wait_for(timeout=10000)
     tab.open_panel_tab("Worksheet")

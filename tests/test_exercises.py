@@ -87,3 +87,21 @@ def test_retune_keeps_running(exercise):
     simulation.advance(10)
     retuned = exercise.retune(simulation, values)
     assert retuned.advance(10).shape[0] == 10
+
+
+def test_actions_and_live_plots_keep_the_contract(exercise):
+    """Optional hooks: every action names a method that yields or returns Analyses; live plots
+    keep their number, series and length while the simulation runs (the app draws them into
+    charts made once)."""
+    for action in exercise.actions:
+        assert action.label and callable(getattr(exercise, action.method))
+    simulation = exercise.simulation(exercise.resolve({}))
+    before = exercise.live_plots(simulation)
+    simulation.advance(max(int(0.01 / simulation.sample_time_s), 10))
+    after = exercise.live_plots(simulation)
+    assert [(p.title.split("(")[0], len(p.x), len(p.series)) for p in before] == \
+        [(p.title.split("(")[0], len(p.x), len(p.series)) for p in after]
+    for plot in after:
+        assert isinstance(plot, Plot) and "[" in plot.x_label and "[" in plot.y_label
+        assert all(len(y) == len(plot.x) for _, y, _ in plot.series)
+        assert len(plot.x) <= 2048, "a live plot streams a few thousand points at most"

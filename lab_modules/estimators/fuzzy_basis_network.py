@@ -160,3 +160,39 @@ def stiffness_networks(ki_table: np.ndarray, ks_table: np.ndarray, ki_train: np.
     ki_history = ki.train(currents, positions, ki_train, epochs, rate, train_weights)
     ks_history = ks.train(currents, positions, ks_train, epochs, rate, train_weights)
     return TrainedPair(ki, ks, *before, ki_history, ks_history)
+
+
+class LiveTraining:
+    """Both networks trained epoch by epoch, as the live view does it.
+
+    Batch steepest descent is deterministic: two ``LiveTraining`` of the same
+    tables and training data hold the same networks at the same epoch, so a 3D
+    view can follow a running training by replaying it (``advance_to``)."""
+
+    def __init__(self, ki_table: np.ndarray, ks_table: np.ndarray, ki_train: np.ndarray, ks_train: np.ndarray,
+                 rate: float, initial_width: float = INITIAL_WIDTH, train_weights: bool = False):
+        self.tables = (np.asarray(ki_table, float), np.asarray(ks_table, float))
+        self.targets = (np.asarray(ki_train, float), np.asarray(ks_train, float))
+        self.rate, self.initial_width, self.train_weights = rate, initial_width, train_weights
+        self.restart()
+
+    def restart(self) -> None:
+        self.ki = FuzzyBasisNetwork.from_table(self.tables[0], self.initial_width)
+        self.ks = FuzzyBasisNetwork.from_table(self.tables[1], self.initial_width)
+        self.epoch = 0
+
+    def train(self, epochs: int) -> None:
+        """``epochs`` more steps of steepest descent on both networks."""
+        if epochs <= 0:
+            return
+        currents, positions = training_grid()
+        self.ki.train(currents, positions, self.targets[0], epochs, self.rate, self.train_weights)
+        self.ks.train(currents, positions, self.targets[1], epochs, self.rate, self.train_weights)
+        self.epoch += int(epochs)
+
+    def advance_to(self, epoch: int) -> None:
+        """The networks after ``epoch`` epochs (from the start again if ``epoch`` lies behind)."""
+        epoch = int(epoch)
+        if epoch < self.epoch:
+            self.restart()
+        self.train(epoch - self.epoch)

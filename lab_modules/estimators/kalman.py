@@ -188,3 +188,23 @@ def pad_columns(C) -> np.ndarray:
     out = np.zeros((C.shape[0], STATE_SIZE))
     out[:, : C.shape[1]] = C
     return out
+
+
+def correction(x_prior, P_prior, C, R_diag, y) -> dict:
+    """The correction step of eq. 2 in batch form (numpy; for inspecting a filter, not
+    for the loops): with S = C P⁻ Cᵀ + R and K = P⁻ Cᵀ S⁻¹, the innovation ν = y − C x⁻,
+    x⁺ = x⁻ + K ν and the Joseph form P⁺ = (I − K C) P⁻ (I − K C)ᵀ + K R Kᵀ.
+
+    For a diagonal R this equals the scalar-at-a-time ``update`` of the loops (up to
+    rounding); ν and S are the batch ones (each measurement against the prior).
+    Returns a dict with ``x``, ``P``, ``K`` (states x measurements), ``innovation``
+    and ``S``."""
+    x_prior, P_prior = np.asarray(x_prior, dtype=float), np.asarray(P_prior, dtype=float)
+    C = np.atleast_2d(np.asarray(C, dtype=float))
+    R = np.diag(np.ravel(np.asarray(R_diag, dtype=float)))
+    S = C @ P_prior @ C.T + R
+    K = np.linalg.solve(S.T, (P_prior @ C.T).T).T          # P Cᵀ S⁻¹ (S symmetric)
+    innovation = np.ravel(np.asarray(y, dtype=float)) - C @ x_prior
+    M = np.eye(len(x_prior)) - K @ C
+    P = M @ P_prior @ M.T + K @ R @ K.T
+    return {"x": x_prior + K @ innovation, "P": 0.5 * (P + P.T), "K": K, "innovation": innovation, "S": S}

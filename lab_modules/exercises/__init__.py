@@ -48,6 +48,7 @@ class Plot:
     points: bool = False                              # markers only (scatter)
     log_x: bool = False                               # logarithmic axes (positive values only)
     log_y: bool = False
+    shade: tuple[tuple[float, float], ...] = ()       # x intervals shaded in live plots (e.g. fit windows)
 
 
 @dataclass
@@ -58,6 +59,20 @@ class Analysis:
     poles: dict[str, np.ndarray]                      # name -> continuous-equivalent poles [rad/s]
     notes: list[str] = field(default_factory=list)
     plots: list[Plot] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class Action:
+    """A button of an exercise that runs a longer computation on demand (a Monte-Carlo run ...).
+
+    ``method`` names an exercise method taking the parameter ``values``: it returns an
+    ``Analysis`` or yields several (progress first, the result last; ``poles`` are not
+    shown).  The app runs it in the background: the tab stays live, a second press
+    starts it afresh, an exercise switch stops it at its next yield."""
+
+    label: str                                        # the button's text
+    method: str
+    hint: str = ""
 
 
 class Simulation(Protocol):
@@ -71,6 +86,14 @@ class Simulation(Protocol):
 
     def status_message(self) -> str:
         """'' while running; a sentence saying why it stopped (touchdown, divergence ...)."""
+
+    # Optional, for simulations with a Kalman filter (the app's filter inspector):
+    # ``filter_state() -> dict | None``: the filter at the sample of the last ``advance(1)``
+    # (None if the last advance ran more samples: the loops then keep nothing extra), after its
+    # correction with that sample's measurement: ``title``, ``time_s``, ``states``
+    # ((label, SI unit), ...), ``x`` (n,), ``P`` (n, n), ``measurements`` ((label, unit), ...),
+    # ``K`` (n, m), ``innovation`` (m,) and ``innovation_sigma`` (m,) = √diag(S) against the
+    # prior (K and the innovation None for a filter that corrects continuously).
 
 
 class SceneView(Protocol):
@@ -103,6 +126,13 @@ class Exercise:
     data_description: str | None = None   # set: the exercise accepts an uploaded CSV
     download_label: str | None = None     # set: a button offers ``download(values)`` as a file
     claims: tuple[Claim, ...] = ()        # the paper's headline results, measured by ``metrics``
+    #: Why the exercise has no feedback loop to grade (then ``open_loops`` stays empty); every
+    #: exercise either declares its loops or says here why it has none (tested).
+    no_feedback_loop: str = ""
+    actions: tuple[Action, ...] = ()      # buttons that run a method in the background (see ``Action``)
+    #: (parameter, pole set): a common gain factor and the closed-loop set of ``Analysis.poles`` it
+    #: moves; the pole map draws that set's paths as the factor sweeps its range (root locus)
+    locus: tuple[str, str] | None = None
 
     def resolve(self, overrides: dict | None = None) -> dict:
         overrides = dict(overrides or {})
@@ -128,6 +158,12 @@ class Exercise:
     def metrics(self, values: dict, duration_s: float) -> dict:
         raise NotImplementedError
 
+    def locus_matrices(self, values: dict, factors: tuple[float, ...]) -> tuple[list[np.ndarray], float | None]:
+        """For ``locus``: the state matrices of that closed loop with the parameter at each of
+        ``factors`` (the others as in ``values``) and their sample time [s] (None: continuous).
+        They must be affine in the factor (it scales the controller's output)."""
+        raise NotImplementedError
+
     def open_loops(self, values: dict) -> dict:
         """Feedback loops broken at the plant input, by name -> open loop L (``control`` LTI
         system, S = 1 / (1 + L)); the app draws their Bode plots, margins and |S|max."""
@@ -135,6 +171,12 @@ class Exercise:
 
     def live_readouts(self, trace: dict[str, np.ndarray]) -> list[tuple[str, float, str]]:
         """Readouts from the scope's buffer (column name -> samples)."""
+        return []
+
+    def live_plots(self, simulation: Simulation) -> list[Plot]:
+        """Plots of the running simulation's newest state (e.g. the raw samples of its last
+        periods), redrawn by the app a few times a second beside the scope; keep each to a
+        few thousand points.  Their number and series must not change during a run."""
         return []
 
     def scene(self, values: dict) -> SceneView | None:

@@ -8,9 +8,10 @@ is used (no pyplot), so the caller chooses the backend (Agg in the report).
 
 from __future__ import annotations
 
+import numpy as np
 from matplotlib.figure import Figure
 
-from lab_modules.exercises import Analysis, Exercise, Plot
+from lab_modules.exercises import Analysis, Chart, Exercise, Plot
 
 MAX_POINTS = 4000                  # samples drawn per line (every k-th sample beyond)
 WIDTH_IN = 9.0                     # figure width [inch] at 100 dpi: fits a 1366 px screen with the table
@@ -46,6 +47,22 @@ def analysis_plots(exercise: Exercise, values: dict, titles: tuple[str, ...] = (
     return [plot for title in titles for plot in analysis.plots if plot.title.startswith(title)]
 
 
+def draw_chart(axes, chart: Chart, trace: np.ndarray, columns: dict[str, int]) -> None:
+    """One scope chart on ``axes``: its series over time [s] (column 0 of ``trace``; ``columns``
+    maps names to trace columns), scaled to the chart's unit, with the ±3σ band if it has one."""
+    t = trace[:, 0]
+    if chart.band is not None:
+        centre, sigma = chart.band
+        scale = next((s.scale for s in chart.series if s.column == centre), chart.series[0].scale)
+        mid, width = trace[:, columns[centre]] * scale, 3.0 * trace[:, columns[sigma]] * scale
+        axes.fill_between(t, mid - width, mid + width, color="#ff9896", alpha=BAND_ALPHA,
+                          linewidth=0, label="±3σ")
+    for series in chart.series:
+        axes.plot(t, trace[:, columns[series.column]] * series.scale, color=series.color,
+                  linewidth=0.8, label=series.label)
+    axes.grid(True, alpha=0.3)
+
+
 def scope_figure(exercise: Exercise, runs: list[tuple[str, dict]], duration_s: float, title: str,
                  charts: tuple[str, ...] = (), window_s: float | None = None) -> Figure:
     """The scope of headless runs side by side: one column per (label, values) run,
@@ -65,17 +82,8 @@ def scope_figure(exercise: Exercise, runs: list[tuple[str, dict]], duration_s: f
     figure.suptitle(title)
     for row, chart in enumerate(shown):
         for col, ((label, _), (trace, columns)) in enumerate(zip(runs, traces)):
-            axes, t = grid[row, col], trace[:, 0]
-            if chart.band is not None:
-                centre, sigma = chart.band
-                scale = next((s.scale for s in chart.series if s.column == centre), chart.series[0].scale)
-                mid, width = trace[:, columns[centre]] * scale, 3.0 * trace[:, columns[sigma]] * scale
-                axes.fill_between(t, mid - width, mid + width, color="#ff9896", alpha=BAND_ALPHA,
-                                  linewidth=0, label="±3σ")
-            for series in chart.series:
-                axes.plot(t, trace[:, columns[series.column]] * series.scale, color=series.color,
-                          linewidth=0.8, label=series.label)
-            axes.grid(True, alpha=0.3)
+            axes = grid[row, col]
+            draw_chart(axes, chart, trace, columns)
             if row == 0:
                 axes.set_title(f"{chart.title}: {label}" if label else chart.title, fontsize="medium")
             else:

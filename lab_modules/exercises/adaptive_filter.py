@@ -51,9 +51,11 @@ from lab_modules.loops.axial_bearing_loop import (
     LoopSimulation,
     Segment,
     column,
+    loop_at_plant_input,
 )
 from lab_modules.parameters import Parameter
 from lab_modules.plants.axial_bearing import AXIAL, GRID_CURRENTS_A, GRID_POSITIONS_M, N_PER_MM
+from lab_modules.scenes.force_map import OperatingPointScene
 
 T = SAMPLE_TIME_S
 PERIOD_S = 0.6
@@ -149,6 +151,9 @@ class AdaptiveFilterSimulation:
             errors.append(column(trace, f"{f}_x_m") - column(trace, "x_true_m"))
             errors.append(column(trace, f"{f}_force_n") - column(trace, "disturbance_n"))
         return np.column_stack([trace, *errors]) if trace.size else np.empty((0, 1 + len(self.columns)))
+
+    def filter_state(self) -> dict | None:
+        return self.loop.filter_state()
 
     def status_message(self) -> str:
         return self.loop.status_message()
@@ -313,6 +318,11 @@ class AdaptiveFilter(Exercise):
                 "H": [[0.0, 0.0, 0.0, 1.0]], "Q_centre": Q.tolist(), "R": [[values["var_sensor_v2"]]],
                 "filters": {f: LABELS[f] for f in FILTERS}, "feedback": values["feedback"]}
 
+    def open_loops(self, values: dict) -> dict:
+        """The PID position loop at the centre operating point, on the chosen feedback."""
+        setup_ = setup(values)
+        return {f"PID on {setup_.feedback}": loop_at_plant_input(setup_)}
+
     def analyse(self, values: dict):
         trace, status = run(values)
         stats = statistics(trace)
@@ -355,6 +365,10 @@ class AdaptiveFilter(Exercise):
             "operating_points_current_a_position_mm": [[i, 1e3 * x] for i, x in stats["points"]],
             "windows_s": [list(w) for w in WINDOWS], "status": status or "ok", "duration_s": max(duration_s, PERIOD_S),
         }
+
+    def scene(self, values: dict) -> OperatingPointScene:
+        """The operating point (i, x, F_Magnet) moving on the force map F(i, x)."""
+        return OperatingPointScene(values)
 
     def live_readouts(self, trace: dict[str, np.ndarray]) -> list[tuple[str, float, str]]:
         """Over the last 50 ms of the scope: F̂_St bias and x̂ RMS per filter."""

@@ -59,6 +59,7 @@ from lab_modules.loops.radial_axis_ekf_loop import (
     SquareWave,
     Step,
     column,
+    loop_at_plant_input,
     no_input,
 )
 from lab_modules.parameters import Parameter
@@ -287,6 +288,11 @@ class EkfDisturbance(Exercise):
                 "G": ef.measurement_matrix(ef.NONLINEAR).tolist(),
                 "Q": axis.filter_Q.tolist(), "R": np.diag(axis.filter_R_diag).tolist(),
                 "P0": axis.filter_P0.tolist()}
+
+    def open_loops(self, values: dict) -> dict:
+        """The PID loop linearised at the centre (x = 0), the EKF at its steady state there."""
+        feedforward = " + feedforward" if values["feedforward"] == "on" else ""
+        return {f"PID, {values['feedback']} x{feedforward}": loop_at_plant_input(setup(values))}
 
     def analyse(self, values: dict) -> Analysis:
         step, sweep = force_step(values), gap_sweep(values)

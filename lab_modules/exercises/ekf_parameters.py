@@ -35,12 +35,21 @@ from dataclasses import replace
 
 import numpy as np
 
+from lab_modules import analysis
 from lab_modules.claims import Claim
 from lab_modules.estimators import extended_kalman as ef
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
-from lab_modules.exercises._common import ekf_loop_fields
+from lab_modules.exercises._common import ekf_loop_fields, pid_from_values
 from lab_modules.exercises.kalman_noise import PARAMETERS as NOISE_EXERCISE_PARAMETERS
-from lab_modules.loops.radial_axis_ekf_loop import EKFLoopSetup, EKFLoopSimulation, Prbs, column
+from lab_modules.loops.radial_axis_ekf_loop import (
+    EKFLoopSetup,
+    EKFLoopSimulation,
+    Prbs,
+    column,
+    loop_at_plant_input,
+    rest_current_a,
+)
+from lab_modules.loops.radial_axis_experiment import AxisSetup
 from lab_modules.parameters import Parameter
 from lab_modules.plants.radial_bearing import RIG
 from lab_modules.scenes.bearing import ESTIMATE_RED, MEASURED_GREY, BearingScene, Ghost
@@ -110,15 +119,30 @@ def setup(values: dict, excitation: bool = True) -> EKFLoopSetup:
         reference=Prbs(amplitude, values["prbs_bit_time_ms"] * 1e-3, values["reference_offset_um"] * 1e-6))
 
 
+def linear_axis(values: dict) -> AxisSetup:
+    """The linear loop the pole map shows (issue 11, defect 9): the PID on the rig's linear model
+    (eq. 3-4) and the EKF's physical part (x, v, i) as a steady-state Kalman filter with the same
+    q_22, q_33 and R, k_i and k_x held at their rated values.  The parameter states are random
+    walks whose error poles sit near s = 0 and move with the excitation: not shown."""
+    return AxisSetup(controller=pid_from_values(values), use_estimate=values["feedback"] == "estimated",
+                     sensor_lag_s=values["sensor_lag_us"] * 1e-6, filter_q_velocity=values["filter_q_velocity"],
+                     filter_q_current=values["filter_q_current"], filter_r_position=values["filter_r_position"],
+                     filter_r_current=values["filter_r_current"])
+
+
+def linear_poles(axis: AxisSetup) -> dict[str, np.ndarray]:
+    """Open-loop plant, closed loop and filter error poles [rad/s] of ``linear_axis``."""
+    K, _ = axis.steady_state_filter
+    A, C = np.asarray(axis.model.A), np.asarray(axis.model.C)
+    return {"open-loop plant": np.linalg.eigvals(np.asarray(RIG.continuous_model(axis.sensor_lag_s).A)),
+            "closed loop (linear, rated k_i, k_x)": analysis.z_to_s(analysis.loop_poles(axis.loop()), T),
+            "filter error (x, v, i at rated k_i, k_x)": analysis.z_to_s(np.linalg.eigvals(A - A @ K @ C), T)}
+
+
 def operating_point(offset_m: float) -> tuple[float, float]:
     """(k_x [N/m], k_i [N/A]) of eq. 10 at rest at x = offset: the current that
     balances the force, f_m(x, i) = 0, found by Newton's method on eq. 10."""
-    physics = ef.physics_vector(RIG)
-    current = 0.0
-    for _ in range(20):
-        _kx, ki = ef.local_factors(offset_m, current, physics)
-        current -= RIG.magnetic_force(offset_m, current) / ki
-    return ef.local_factors(offset_m, current, physics)
+    return ef.local_factors(offset_m, rest_current_a(RIG, offset_m), ef.physics_vector(RIG))
 
 
 def final_errors(trace: np.ndarray) -> dict[str, float]:
@@ -153,6 +177,7 @@ class EkfParameters(Exercise):
     parameters = PARAMETERS
     default_duration_s = 2.0
     claims = CLAIMS
+    locus = ("pid_gain", "closed loop (linear, rated k_i, k_x)")
     charts = (
         Chart("Force-current factor k_i", "N/A", (
             Series("estimate", "ki_estimated_n_per_a", 1.0, "#d62728"),
@@ -179,6 +204,11 @@ class EkfParameters(Exercise):
                 "Q": axis.filter_Q.tolist(), "R": np.diag(axis.filter_R_diag).tolist(),
                 "x0": axis.filter_x0.tolist(), "P0": axis.filter_P0.tolist()}
 
+    def open_loops(self, values: dict) -> dict:
+        """The PID loop linearised at the operating point x_0, the EKF at its converged estimates."""
+        return {f"PID, {values['feedback']} x": loop_at_plant_input(
+            setup(values), values["reference_offset_um"] * 1e-6)}
+
     def analyse(self, values: dict) -> Analysis:
         offset = values["reference_offset_um"] * 1e-6
         kx, ki = operating_point(offset)
@@ -200,11 +230,16 @@ class EkfParameters(Exercise):
             ("Initial k_i error", 100.0 * (values["initial_ki_n_per_a"] / ki - 1.0), "%"),
             ("Initial k_x error", 100.0 * (values["initial_kx_n_per_um"] * 1e6 / kx - 1.0), "%"),
         ]
-        poles = {"open-loop plant": np.linalg.eigvals(np.asarray(RIG.continuous_model().A))}
+        poles = linear_poles(linear_axis(values))
         notes = [("The true local values on the scope are the derivatives of eq. 10 at the rotor's "
                  "true position and current; they move with the PRBS, the estimates cannot "
                  "(eq. 9 is linear).")]
         return Analysis(readouts, poles, notes, plots)
+
+    def locus_matrices(self, values: dict, factors: tuple[float, ...]) -> tuple[list[np.ndarray], float]:
+        """The linear loop's state matrices (the states in the feedback) at these PID gains K."""
+        axis = linear_axis(values)
+        return [axis.loop_matrix(factor / values["pid_gain"]) for factor in factors], T
 
     def simulation(self, values: dict) -> EKFLoopSimulation:
         return EKFLoopSimulation(setup(values), seed=int(values["seed"]))

@@ -189,6 +189,7 @@ class KalmanNoise(Exercise):
     worksheet = "kalman_noise.md"
     parameters = PARAMETERS
     claims = CLAIMS
+    locus = ("gain_factor", "closed loop")
     charts = (
         Chart("Rotor position", "µm", (
             Series("measured", "x_measured_m", 1e6, "#b0b0b0"),
@@ -203,6 +204,11 @@ class KalmanNoise(Exercise):
         axis = setup(values)
         return {f"{source} feedback": axis.with_changes(use_estimate=source == "estimated").loop_at_plant_input()
                 for source in ("measured", "estimated")}
+
+    def locus_matrices(self, values: dict, factors: tuple[float, ...]) -> tuple[list[np.ndarray], float]:
+        """The loop's state matrices (the states in the feedback) at these gain factors."""
+        axis = setup(values)
+        return [axis.loop_matrix(factor / values["gain_factor"]) for factor in factors], T
 
     def model(self, values: dict) -> dict:
         axis = setup(values)

@@ -573,6 +573,11 @@ class SideBySide:
         parts += [trace[:rows, [1 + TRACE_COLUMNS.index(c) for c in SCOPE_COLUMNS]] for trace in traces]
         return np.hstack(parts)
 
+    def filter_state(self) -> dict | None:
+        """The LQG loop's Kalman filter (the one its regulator acts on)."""
+        state = self.simulations["LQG"].filter_state()
+        return state and {**state, "title": f"LQG loop: {state['title']}"}
+
     def status_message(self) -> str:
         return " ".join(f"{name} loop: {sim.status_message()}"
                         for name, sim in self.simulations.items() if sim.status != OK)
@@ -663,6 +668,7 @@ class LqgVsPid(Exercise):
     worksheet = "lqg_vs_pid.md"
     parameters = PARAMETERS
     default_duration_s = 1.0
+    locus = ("pid_gain", "PID loop with filter")
     #: CLAIMS, plus the PID's side of Fig. 8 (step tests are noise-free, so a short run does).
     claims = CLAIMS + (
         Claim("paper 000 §IV, Fig. 8", "PID peak control current, 50 µm reference step", "far above the LQG's",
@@ -692,6 +698,11 @@ class LqgVsPid(Exercise):
                 "regulator_states": ["x [m]", "v [m/s]", "i [A]", "xi = ∫(r - x) dt [m s]"],
                 "A_aug": A_aug.tolist(), "B_aug": B_aug.tolist(),
                 "state_gain_K": list(lqg.state_gain), "integral_gain_K_I_v_per_m_s": lqg.integral_gain_v_per_m_s}
+
+    def locus_matrices(self, values: dict, factors: tuple[float, ...]) -> tuple[list[np.ndarray], float]:
+        """The PID loop's state matrices (the states in the feedback) at these PID gains K."""
+        axis = setups(values)["PID"]
+        return [axis.loop_matrix(factor / values["pid_gain"]) for factor in factors], T
 
     def open_loops(self, values: dict) -> dict:
         return {name: axis.loop_at_plant_input() for name, axis in setups(values).items()}

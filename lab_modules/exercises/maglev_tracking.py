@@ -36,6 +36,7 @@ from lab_modules.loops.maglev_loop import (
     MaglevSetup,
     MaglevSimulation,
     Reference,
+    loop_at_plant_input,
     preset_q,
     record_lead_lag_run,
 )
@@ -212,6 +213,11 @@ class MaglevTracking(Exercise):
                               "force_constant_n_m2_per_a2": TABLE_3_1.force_constant_n_m2_per_a2},
                 "jacobian_at_14_8_mm": F.tolist(), "feedback_gain": s.gain.tolist(),
                 "Q": s.filter_Q.tolist(), "R": s.sensor_noise_m**2, "P0": (s.initial_covariance * np.eye(3)).tolist()}
+
+    def open_loops(self, values: dict) -> dict:
+        """The running controller, linearised at the equilibrium at 14.8 mm."""
+        name = "lead-lag" if values["controller"] == "lead-lag" else "linearising control + EKF"
+        return {name: loop_at_plant_input(setup(values))}
 
     def analyse(self, values: dict) -> Analysis:
         s = setup(values)

@@ -30,7 +30,7 @@ from lab_modules import recordings
 from lab_modules.claims import Claim
 from lab_modules.estimators.continuous_discrete_ekf import OBSERVER_COLUMNS, run_observer
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
-from lab_modules.loops.maglev_loop import preset_q
+from lab_modules.loops.maglev_loop import MaglevSetup, loop_at_plant_input, preset_q
 from lab_modules.parameters import Parameter, ParameterError
 from lab_modules.plants.maglev_ball import TABLE_3_1
 from lab_modules.scenes.maglev import DRAWN_GAP_MAX_M, Columns, DrawingScale, MaglevScene, exaggeration_for
@@ -249,6 +249,11 @@ class MaglevTuning(Exercise):
                                                        else (values["filter_sensor_noise_mm"] * 1e-3) ** 2),
                 "P0": (values["initial_covariance"] * np.eye(3)).tolist(),
                 "recording": rec.name, "recording_rows": len(rec), "recording_metadata": rec.metadata}
+
+    def open_loops(self, values: dict) -> dict:
+        """The loop the shipped recording ran in: the lab's lead-lag at 14.8 mm (the filter
+        only watches).  An uploaded recording's controller is not known: the same loop is shown."""
+        return {"recorded lead-lag": loop_at_plant_input(MaglevSetup(controller="lead-lag"))}
 
     def analyse(self, values: dict) -> Analysis:
         rec = recording(values)

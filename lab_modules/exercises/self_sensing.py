@@ -15,9 +15,11 @@ eq. 23) and §5 (noise σ(i), σ(v)), the resistance the estimator assumes, the
 window, T_a and T_pwm, the two operating points and the transition time of
 the paper's simulations (Fig. 2-7), v_bat.  Loop: the compiled 1 µs
 simulation of ``loops.self_sensing_loop`` (prescribed 4 → 6 → 4 mm motion,
-per-period duty controller).  Views: inductance, gap and errors per PWM
-period with ±3σ̂ bands, σ̂ traces; the Analysis tab shows the ripple of two
-periods with the fitted lines and a Monte-Carlo histogram.  Claims: §3-5 of
+per-period duty controller).  Views: a live ripple zoom of the newest two
+PWM periods (``live_plots``: every 8th sample, windows shaded, fitted lines);
+inductance, gap and errors per PWM period with ±3σ̂ bands, σ̂ traces; the
+Analysis tab shows the ripple at every sample and a histogram.  The button
+*Run Monte-Carlo* (``actions``) checks eq. 31 over 4 seeds.  Claims: §3-5 of
 the paper with the lab's parameter set (``plants.self_sensing_ball``).
 """
 
@@ -42,7 +44,7 @@ from lab_modules.parameters import Parameter
 from lab_modules.plants.self_sensing_ball import RIG
 from lab_modules.scenes.self_sensing import SelfSensingScene
 
-from . import Analysis, Chart, Exercise, Plot, Series
+from . import Action, Analysis, Chart, Exercise, Plot, Series
 
 SAMPLE_TIMES_US = ("0.5", "1", "2")
 PWM_MODES = ("fixed T_pwm", "T_pwm = 1024 T_a")
@@ -51,6 +53,10 @@ SETTLE_PERIODS = 40          # periods before a stationary run is measured (the 
 NOISY_PERIODS = 5000         # stationary periods per gap with noise: coverage of ±3σ̂ over ≥ 5000 periods
 QUIET_PERIODS = 300          # stationary periods per gap without noise
 LAST_PERIODS = 500           # the live "empirical std" window
+RIPPLE_PERIODS = 2           # PWM periods in the ripple zoom
+LIVE_RIPPLE_POINTS = 256     # samples per live ripple plot (every 8th of 2 × 1024): 1 kB per series and update
+MONTE_CARLO_SEEDS = 4        # the Monte-Carlo button: seeds × periods held at one gap
+MONTE_CARLO_PERIODS = 1250
 GAPS = ("gap_1", "gap_2")
 PHASES = ("phase_1", "phase_2")
 
@@ -164,7 +170,8 @@ def derived(rows: np.ndarray, source: str) -> np.ndarray:
 
 
 class SelfSensingSimulation:
-    """The app's view of the loop: one row per PWM period."""
+    """The app's view of the loop: one row per PWM period; the raw samples of the newest
+    two periods are kept for the live ripple zoom (``ripple``), never streamed."""
 
     columns = COLUMNS + EXTRA_COLUMNS
 
@@ -173,13 +180,21 @@ class SelfSensingSimulation:
         self.loop = loop or SelfSensingLoop(setup(values), seed=int(values["seed"]))
         self.sample_time_s = self.loop.setup.period_s
         self.wall_s, self.simulated_s = 0.0, 0.0
+        self.ripple = (np.empty((0, 5)), np.empty(0))    # (raw samples of ≤ 2 periods, their duties)
 
     def advance(self, n_steps: int) -> np.ndarray:
         first = self.loop.period
         start = time.perf_counter()
-        rows, _ = self.loop.run(n_steps)
+        n = self.loop.setup.samples_per_period
+        older, _ = self.loop.run(max(n_steps - RIPPLE_PERIODS, 0))
+        newest, raw = self.loop.run(min(n_steps, RIPPLE_PERIODS), raw_samples=RIPPLE_PERIODS * n)
+        rows = np.concatenate([older, newest])
         self.wall_s += time.perf_counter() - start
         self.simulated_s += n_steps * self.sample_time_s
+        if n_steps:
+            kept, duties = self.ripple
+            self.ripple = (np.concatenate([kept, raw])[-RIPPLE_PERIODS * n:],
+                           np.concatenate([duties, newest[:, COLUMN["duty"]]])[-RIPPLE_PERIODS:])
         t = (first + 0.5 + np.arange(n_steps)) * self.sample_time_s
         return np.column_stack([t, rows, derived(rows, self.values["position_from"])])
 
@@ -244,17 +259,62 @@ IDEAL = {"current_gain": 1.0, "voltage_gain": 1.0, "current_offset_a": 0.0, "vol
          "sigma_current_a": 0.0, "sigma_voltage_v": 0.0, "resistance_ratio": 1.0, "printed_eq7": False}
 
 
-def histogram(normalised: np.ndarray) -> Plot:
+def histogram(normalised: np.ndarray, where: str = "gap 1") -> Plot:
     """(L̄ − L)/σ̂ against the standard normal density."""
     normalised = normalised[np.isfinite(normalised)]
     edges = np.linspace(-4.0, 4.0, 33)
     counts, _ = np.histogram(normalised, bins=edges)
     centres = 0.5 * (edges[1:] + edges[:-1])
     density = counts / (max(len(normalised), 1) * (edges[1] - edges[0]))
-    return Plot("Monte-Carlo at gap 1: (L̄ − L)/σ̂(L̄) per PWM period against N(0, 1)",
+    return Plot(f"Monte-Carlo at {where}: (L̄ − L)/σ̂(L̄) per PWM period against N(0, 1)",
                 "normalised error (L̄ − L)/σ̂ [1]", "density [1]", centres,
                 (("histogram", density, "#1f77b4"),
                  ("N(0, 1)", np.exp(-0.5 * centres**2) / math.sqrt(2 * math.pi), "#d62728")))
+
+
+def ripple_plots(s: SelfSensingSetup, raw: np.ndarray, duties: np.ndarray, title: str,
+                 points: int | None = None) -> list[Plot]:
+    """The ripple zoom of two PWM periods from their raw samples (rows: time, true i, measured
+    i, measured v, applied v; ``duties`` per period): true and measured current, the LS
+    windows (shaded), the lines fitted over them (eq. 9-10) and the voltage.  ``points``:
+    draw every k-th sample, at most this many (the fits use them all).  Before two periods
+    have run, the plots are empty (zeros) with the same series."""
+    n = s.samples_per_period
+    total = RIPPLE_PERIODS * n
+    step = 1 if points is None else -(-total // points)
+    shown = np.arange(0, total, step)
+    t_us = shown * s.sample_time_s * 1e6
+    ready = len(raw) == total and len(duties) == RIPPLE_PERIODS
+    raw = raw if ready else np.zeros((total, 5))
+    r_hat = s.resistance_ratio * RIG.coil_resistance_ohm * (-1.0 if s.printed_eq7 else 1.0)
+    dof = "M + d" if s.printed_dof else "M-d"
+    fits, windows = [], []
+    for p in range(RIPPLE_PERIODS):
+        n_on = round(duties[p] * n) if ready else n // 2
+        current, voltage = raw[p * n:(p + 1) * n, 2], raw[p * n:(p + 1) * n, 3]
+        # phase II ends one sample early: the sample after the period is not in ``raw``
+        for phase, (start, stop) in enumerate(((s.trim_samples, n_on - s.trim_samples),
+                                               (n_on + s.trim_samples, n - s.trim_samples - 1))):
+            line = np.full(len(shown), np.nan)
+            windows.append(((p * n + start) * s.sample_time_s * 1e6,
+                            (p * n + stop) * s.sample_time_s * 1e6))
+            if ready:
+                result = fit(current, voltage, start, stop, r_hat, s.sample_time_s, dof)
+                flux = np.concatenate([[0.0], np.cumsum(voltage[start:stop] - r_hat * current[start:stop])])
+                inside = np.flatnonzero((shown >= p * n + start) & (shown <= p * n + stop))
+                # the line at ≤ 17 points of the window (NaN elsewhere costs next to nothing on the wire)
+                inside = inside[np.unique(np.linspace(0, len(inside) - 1, min(len(inside), 17)).round().astype(int))]
+                line[inside] = (result["initial_current_a"]
+                                + s.sample_time_s / result["inductance_h"] * flux[shown[inside] - p * n - start])
+            fits.append((f"fit {'I' * (phase + 1)}, period {p + 1}", line, "#ff7f0e" if phase == 0 else "#2ca02c"))
+    raw = raw[shown]
+    windows = tuple(windows)
+    return [
+        Plot(title, "time [µs]", "current [A]", t_us,
+             (("measured i_m", raw[:, 2], "#a0a0a0"), ("true i", raw[:, 1], "#000000"), *fits), shade=windows),
+        Plot("Bridge voltage of the same two periods", "time [µs]", "voltage [V]", t_us,
+             (("applied v", raw[:, 4], "#000000"), ("measured v_m", raw[:, 3], "#9467bd")), shade=windows),
+    ]
 
 
 class SelfSensing(Exercise):
@@ -263,6 +323,11 @@ class SelfSensing(Exercise):
     worksheet = "self_sensing.md"
     parameters = PARAMETERS
     default_duration_s = 1.3       # one cycle 4 → 6 → 4 mm with 0.35 s holds and 0.3 s moves
+    no_feedback_loop = (
+        "The gap follows a prescribed trajectory (the ball is moved, not levitated): there is no "
+        "position loop for ISO 14839-3 to grade.  The per-period duty rule sets the next period's "
+        "flux from the model and the present flux (a one-period dead-beat, S = 1 − z⁻¹ whatever the "
+        "settings), so its margins would say nothing about the estimator.")
     charts = (
         Chart("Inductance", "mH", (
             Series("L̄ (eq. 18)", "inductance_mean_h", 1e3, "#d62728"),
@@ -335,60 +400,68 @@ class SelfSensing(Exercise):
                 (f"σ̂(ŝ) {tag} (eq. 32)", st["predicted_sigma_position_um"], "µm"),
             ]
             poles[f"coil −R/L {tag}"] = np.array([-RIG.coil_resistance_ohm / inductance], dtype=complex)
-        notes = [("Readouts from 300 PWM periods held at each gap with the current settings; the Monte-Carlo "
-                  "run (4 seeds × 1250 periods at gap 1) follows.")]
-        plots = self.ripple_plots(values)
+        notes = [("Readouts from 300 PWM periods held at each gap with the current settings; the histogram "
+                 "is from those at gap 1. *Run Monte-Carlo* (controls, left) checks σ̂(L̄) over "
+                 f"{MONTE_CARLO_SEEDS} seeds × {MONTE_CARLO_PERIODS} periods.")]
         quick = runs["gap_1"]
-        yield Analysis(readouts, poles, notes, plots + [histogram(
+        return Analysis(readouts, poles, notes, self.ripple_plots(values) + [histogram(
             (quick[:, COLUMN["inductance_mean_h"]] - quick[:, COLUMN["inductance_true_h"]])
-            / quick[:, COLUMN["sigma_inductance_mean_h"]])])
-        rows_all = []
-        for k in range(4):
-            rows = stationary(values, "gap_1", periods=1250, seed_offset=1000 + k)
-            rows_all.append(rows)
-        rows = np.concatenate(rows_all)
-        st = statistics(rows)
-        c = COLUMN
-        normalised = (rows[:, c["inductance_mean_h"]] - rows[:, c["inductance_true_h"]]) / rows[:, c["sigma_inductance_mean_h"]]
-        readouts = readouts + [
-            ("Monte-Carlo std / predicted σ̂(L̄) at gap 1 (4 seeds × 1250 periods)",
-             st["monte_carlo_to_predicted_ratio"], ""),
-            ("Share inside ±3σ̂(L̄) at gap 1 (Monte-Carlo)", st["within_3sigma_percent"], "%")]
-        yield Analysis(readouts, poles, ["Monte-Carlo: 4 seeds × 1250 PWM periods at gap 1."],
-                       plots + [histogram(normalised)])
+            / quick[:, COLUMN["sigma_inductance_mean_h"]], f"{s.gap_1_m * 1e3:g} mm (300 periods)")])
 
     def ripple_plots(self, values: dict) -> list[Plot]:
-        """Two PWM periods at gap 1: true and measured current, the fitted lines over the windows,
-        the measured voltage."""
+        """Two PWM periods at gap 1 after the duty has settled (the Analysis tab's snapshot of the
+        current settings; the Scope tab shows the running simulation's newest periods live)."""
         s = fixed(values, "gap_1")
         loop = SelfSensingLoop(s, seed=int(values["seed"]))
         loop.run(SETTLE_PERIODS)
-        n = s.samples_per_period
-        rows, raw = loop.run(2, raw_samples=2 * n)
-        t_us = (raw[:, 0] - raw[0, 0]) * 1e6
-        # one series per window: the chart would join the NaN gaps between two windows of a series
-        fits = []
-        r_hat = s.resistance_ratio * RIG.coil_resistance_ohm * (-1.0 if s.printed_eq7 else 1.0)
-        dof = "M + d" if s.printed_dof else "M-d"
-        for p in range(2):
-            n_on = round(rows[p, COLUMN["duty"]] * n)
-            current, voltage = raw[p * n:(p + 1) * n, 2], raw[p * n:(p + 1) * n, 3]
-            for phase, (start, stop) in enumerate(((s.trim_samples, n_on - s.trim_samples),
-                                                   (n_on + s.trim_samples, n - s.trim_samples - 1))):
-                result = fit(current, voltage, start, stop, r_hat, s.sample_time_s, dof)
-                flux = np.concatenate([[0.0], np.cumsum(voltage[start:stop] - r_hat * current[start:stop])])
-                line = np.full(2 * n, np.nan)
-                line[p * n + start:p * n + stop + 1] = (result["initial_current_a"]
-                                                        + s.sample_time_s / result["inductance_h"] * flux)
-                fits.append((f"fit {'I' * (phase + 1)}, period {p + 1}", line,
-                             "#ff7f0e" if phase == 0 else "#2ca02c"))
-        return [
-            Plot(f"Ripple of two PWM periods at {s.gap_1_m * 1e3:g} mm: fitted lines over the windows "
-                 "(eq. 9-10)", "time [µs]", "current [A]", t_us,
-                 (("measured i_m", raw[:, 2], "#c0c0c0"), ("true i", raw[:, 1], "#000000"), *fits)),
-            Plot("Bridge voltage of the same two periods", "time [µs]", "voltage [V]", t_us,
-                 (("applied v", raw[:, 4], "#000000"), ("measured v_m", raw[:, 3], "#9467bd"))),
-        ]
+        rows, raw = loop.run(RIPPLE_PERIODS, raw_samples=RIPPLE_PERIODS * s.samples_per_period)
+        return ripple_plots(s, raw, rows[:, COLUMN["duty"]],
+                            f"Ripple of two PWM periods at {s.gap_1_m * 1e3:g} mm: fitted lines over the windows "
+                            "(eq. 9-10)")
+
+    def live_plots(self, simulation: SelfSensingSimulation) -> list[Plot]:
+        """The ripple zoom of the running simulation: its newest two PWM periods."""
+        raw, duties = simulation.ripple
+        s = simulation.loop.setup
+        step = -(-RIPPLE_PERIODS * s.samples_per_period // LIVE_RIPPLE_POINTS)
+        every = f"every {step}{'nd' if step == 2 else 'th'} sample" if step > 1 else "every sample"
+        return ripple_plots(s, raw, duties, f"Ripple zoom, live: the newest two PWM periods ({every}; "
+                            "shaded: the LS windows, eq. 9-10)", points=LIVE_RIPPLE_POINTS)
+
+    actions = (Action("Run Monte-Carlo", "monte_carlo",
+                      f"{MONTE_CARLO_SEEDS} seeds × {MONTE_CARLO_PERIODS} PWM periods held at one gap (gap 2 when "
+                      "the ball is fixed there, else gap 1) with the current settings: does the spread of L̄ − L "
+                      "match the predicted σ̂(L̄) of eq. 31, and does ±3σ̂ hold 99.7 %?"),)
+
+    def monte_carlo(self, values: dict, seeds: int = MONTE_CARLO_SEEDS, periods: int = MONTE_CARLO_PERIODS):
+        """A Monte-Carlo check of eq. 31 at one fixed gap (§5, Fig. 6): the empirical std of L̄ − L over
+        ``seeds`` × ``periods`` PWM periods against the mean predicted σ̂(L̄), the share inside ±3σ̂ and the
+        histogram of (L̄ − L)/σ̂ against N(0, 1).  Yields the figures after every seed (progress)."""
+        gap = "gap_2" if values["trajectory"] == TRAJECTORIES[2] else "gap_1"
+        gap_mm = values[f"{gap}_mm"]
+        c = COLUMN
+        notes = [] if values["sigma_current_ma"] > 0 or values["sigma_voltage_mv"] > 0 else [
+            ("No noise is set: σ̂ only measures the ramp's curvature and the ratio means little. "
+            "Set σ(i) = 1 mA, σ(v) = 15 mV (§5).")]
+        runs = []
+        yield Analysis([("Periods simulated", 0, f"of {seeds * periods}")], {},
+                       [f"Monte-Carlo at {gap_mm:g} mm: seed 1 of {seeds} …", *notes])
+        for k in range(seeds):
+            runs.append(stationary(values, gap, periods=periods, seed_offset=1000 + k))
+            rows = np.concatenate(runs)
+            st = statistics(rows)
+            normalised = ((rows[:, c["inductance_mean_h"]] - rows[:, c["inductance_true_h"]])
+                          / rows[:, c["sigma_inductance_mean_h"]])
+            done = k + 1 == seeds
+            progress = (f"Monte-Carlo at {gap_mm:g} mm: {k + 1} of {seeds} seeds done"
+                        + ("." if done else f", seed {k + 2} running …"))
+            yield Analysis([
+                ("MC std of L̄ − L / predicted σ̂(L̄)", st["monte_carlo_to_predicted_ratio"], ""),
+                ("Share of L̄ − L inside ±3σ̂(L̄)", st["within_3sigma_percent"], "%"),
+                ("Periods", st["periods"], f"({k + 1} seeds × {periods})"),
+                ("Empirical std of L̄ − L", st["empirical_sigma_inductance_uh"], "µH"),
+                ("Mean predicted σ̂(L̄) (eq. 31)", st["predicted_sigma_inductance_uh"], "µH"),
+            ], {}, [progress, *notes], [histogram(normalised, f"{gap_mm:g} mm")])
 
     def simulation(self, values: dict) -> SelfSensingSimulation:
         return SelfSensingSimulation(values)
@@ -406,7 +479,9 @@ class SelfSensing(Exercise):
         old = simulation.loop
         if new.samples_per_period != old.setup.samples_per_period or new.sample_time_s != old.setup.sample_time_s:
             return self.simulation(values)
-        return SelfSensingSimulation(values, old.retuned(new))
+        carried = SelfSensingSimulation(values, old.retuned(new))
+        carried.ripple = simulation.ripple
+        return carried
 
     def live_readouts(self, trace: dict[str, np.ndarray]) -> list[tuple[str, float, str]]:
         last = slice(-LAST_PERIODS, None)

@@ -174,6 +174,15 @@ def plant(values: dict, sensor_offset_mm: float | None = None) -> control.StateS
                   values["sensor_lag_us"] * 1e-6)
 
 
+def loop_at_plant_input(values: dict) -> control.StateSpace:
+    """Open loop L broken at the amplifier input i_ref (S = 1 / (1 + L)): every mode the
+    plant keeps, the sensor at its position, the compensator reading position and current."""
+    system = plant(values)
+    A, B, C, D = (np.asarray(M) for M in (system.A, system.B, system.C, system.D))
+    measured = control.ss(A, B[:, :1], C[[0, 3]], D[[0, 3], :1], system.dt)   # (K_mx x_d, K_mi i) [V]
+    return analysis.loop_at_plant_input(measured, compensator(values)[:, :2])
+
+
 def loop(values: dict, gain_factor: float | None = None, sensor_offset_mm: float | None = None):
     """The closed loop at the given gain factor and sensor position (defaults: the values')."""
     return closed_loop(plant(values, sensor_offset_mm), compensator(values, gain_factor, sensor_offset_mm))
@@ -338,6 +347,7 @@ class SensorPlacement(Exercise):
     parameters = PARAMETERS
     default_duration_s = 0.3
     claims = CLAIMS
+    locus = ("gain_factor", "closed loop")
     charts = (
         Chart("Rotor position", "µm", (
             Series("reference", "reference_m", 1e6, "#7f7f7f"),
@@ -346,6 +356,10 @@ class SensorPlacement(Exercise):
             Series("rotor at the bearing", "x_bearing_m", 1e6, "#1f77b4"))),
         Chart("Control current", "A", (Series("coil current i", "current_a", 1.0, "#2ca02c"),)),
     )
+
+    def locus_matrices(self, values: dict, factors: tuple[float, ...]) -> tuple[list[np.ndarray], float]:
+        """The closed loop's state matrices at these gain factors."""
+        return [np.asarray(loop(values, factor).A) for factor in factors], T
 
     def model(self, values: dict) -> dict:
         r = rotor(values["modal_damping_percent"] / 100)
@@ -369,6 +383,9 @@ class SensorPlacement(Exercise):
                          "total_mass_kg": r.total_mass_kg},
             "sensor": "integrated capacitive" if integrated(values["sensor_offset_mm"]) else "external eddy-current",
         }
+
+    def open_loops(self, values: dict) -> dict:
+        return {f"bearing PID, {values['feedback']} x": loop_at_plant_input(values)}
 
     def analyse(self, values: dict) -> Analysis:
         n = int(values["modes"])

@@ -30,9 +30,11 @@ from functools import lru_cache
 import numpy as np
 
 from lab_modules.claims import Claim
+from lab_modules.estimators.adaline import miso_run
 from lab_modules.estimators.fuzzy_basis_network import (
     INITIAL_WIDTH,
     FuzzyBasisNetwork,
+    LiveTraining,
     TrainedPair,
     stiffness_networks,
     test_grid,
@@ -46,6 +48,7 @@ from lab_modules.loops.axial_bearing_loop import (
     LoopSimulation,
     Segment,
     column,
+    loop_at_plant_input,
 )
 from lab_modules.parameters import Parameter
 from lab_modules.plants.axial_bearing import (
@@ -56,6 +59,7 @@ from lab_modules.plants.axial_bearing import (
     TABLE_4_KI_N_PER_A,
     TABLE_5_KS_N_PER_MM,
 )
+from lab_modules.scenes.force_map import StiffnessMapScene, error_heat_map
 
 T = SAMPLE_TIME_S
 K_MAGNET_PAPER = AXIAL.k_magnet_n_m2_per_a2 * 1e6        # 6.7 N·mm²/A²
@@ -108,6 +112,13 @@ PARAMETERS = (
     P("axis", "Bearing axis", "", "vertical", choices=("vertical", "horizontal"),
       description="vertical: the magnets carry the rotor's weight; horizontal: no load, the magnet force "
                   "is zero at the centre and the ADALINE learns nothing.", group="ADALINE"),
+    P("miso_rate", "MISO ADALINE learning rate η", "1/A²", 0.1, 1e-3, 1.0,
+      "Widrow-Hoff step of the MISO ADALINE F̂ = w_i i + w_s x (i in A, x in mm); time constant "
+      "1/(η i²) ≈ 35 samples at the rotor's weight (lab choice).", log=True, group="ADALINE"),
+    P("view_surface", "3D view shows", "", "force", choices=("force", "k_i", "k_s"),
+      description="force: F(i, x) with the nodes, the tangent and the LSM plane at the node; k_i, k_s: the "
+                  "FBFNN surface while it trains, its error as colour and as a heat map on the floor.",
+      group="3D view"),
     P("seed", "Noise seed", "", 1, 0, 1_000_000, "Seed of the noise generators.", integer=True, group="Run"),
     P("time_scale", "Time scale", "×", 0.05, 0.001, 1.0,
       "Simulated seconds per wall-clock second in the live view.", log=True, group="Run"),
@@ -209,18 +220,60 @@ def adaline_pole(values: dict) -> np.ndarray:
     return np.array([np.log(factor) / T if factor > 0 else -np.pi / T])
 
 
+MISO_WINDOWS_S = ((0.05, 0.1), (0.15, 0.2))    # steady windows before and after the k_Magnet step
+MISO_SEED_OFFSET = 7919                         # its force noise is drawn apart from the loop's
+
+
+def miso_estimates(trace: np.ndarray, rate: float, weights: np.ndarray, force_noise_n: float,
+                   rng: np.random.Generator) -> np.ndarray:
+    """The MISO ADALINE over a loop trace (``weights`` carry on): rows (F̂ [N], w_i [N/A], w_s [N/mm]).
+    Inputs: the coil current and the measured (delayed, noisy) position in mm; target: the magnet
+    force with white noise σ_F, as the SISO ADALINE gets it."""
+    force = column(trace, "magnet_force_n")
+    if force_noise_n > 0:
+        force = force + rng.normal(0.0, force_noise_n, force.size)
+    out = np.empty((force.size, 3))
+    miso_run(weights, np.ascontiguousarray(column(trace, "current_a")),
+             np.ascontiguousarray(column(trace, "x_measured_m") * 1e3), np.ascontiguousarray(force), rate, out)
+    return out
+
+
+def miso_summary(t: np.ndarray, trace: np.ndarray, miso: np.ndarray) -> dict:
+    """Per steady window: RMS of F̂ − F [N], the weights at its end, and numpy's least squares of the
+    same samples (the batch answer the LMS approaches) with its own residual RMS."""
+    force = column(trace, "magnet_force_n")
+    current, position_mm = column(trace, "current_a"), column(trace, "x_measured_m") * 1e3
+    out: dict = {"rms_error_n": [], "weights_end": [], "lstsq_weights": [], "lstsq_rms_n": []}
+    for start, end in MISO_WINDOWS_S:
+        w = (t >= start - 1e-9) & (t < end - 1e-9)
+        if not w.any():
+            for series in out.values():
+                series.append(float("nan"))
+            continue
+        A = np.column_stack([current[w], position_mm[w]])
+        theta, *_ = np.linalg.lstsq(A, force[w], rcond=None)
+        out["rms_error_n"].append(float(np.sqrt(np.mean((miso[w, 0] - force[w]) ** 2))))
+        out["weights_end"].append(miso[w][-1, 1:].tolist())
+        out["lstsq_weights"].append(theta.tolist())
+        out["lstsq_rms_n"].append(float(np.sqrt(np.mean((A @ theta - force[w]) ** 2))))
+    return out
+
+
 def adaline_run(values: dict, axis: str | None = None) -> dict:
-    """One period: from the start and after the k_Magnet step."""
+    """One period: from the start and after the k_Magnet step (SISO and MISO ADALINE)."""
     simulation = LoopSimulation(loop_setup(values, networks(values), axis=axis), seed=int(values["seed"]))
     trace = simulation.advance(round(ADALINE_DURATION_S / T))
     t, estimate = trace[:, 0], column(trace, "k_magnet_estimate")
+    miso = miso_estimates(trace, values["miso_rate"], np.zeros(2), values["force_noise_n"],
+                          np.random.default_rng(int(values["seed"]) + MISO_SEED_OFFSET))
     before, after = t < ADALINE_STEP_S, t >= ADALINE_STEP_S
     stepped = K_MAGNET_PAPER * (1.0 + values["k_magnet_step_percent"] / 100.0)
     return {"t": t, "estimate": estimate, "truth": column(trace, "k_magnet_true"),
             "from_start_ms": time_to_within(t[before], estimate[before], K_MAGNET_PAPER, 0.0),
             "after_step_ms": time_to_within(t[after], estimate[after], stepped, ADALINE_STEP_S),
             "final": float(estimate[before][-1]) if before.any() else float("nan"),
-            "status": simulation.status_message() or "ok"}
+            "status": simulation.status_message() or "ok",
+            "force": column(trace, "magnet_force_n"), "miso": miso, "miso_summary": miso_summary(t, trace, miso)}
 
 
 # -- live view --------------------------------------------------------------------------------------
@@ -228,25 +281,58 @@ def adaline_run(values: dict, axis: str | None = None) -> dict:
 EPOCHS_PER_BLOCK_S = 2e-3            # the live view trains one epoch per 2 ms of simulated time
 
 
+def live_training(values: dict) -> LiveTraining:
+    """Both networks at epoch 0, trained on the 20×20 LSM grid as the live view does it
+    (the 3D view replays the same training to draw the surface at the scope's epoch)."""
+    ki, ks_mm = identified_tables(values)
+    train_i, train_x = training_grid()
+    ki_train, ks_train = lsm_factors(train_i, train_x, **lsm_kwargs(values))
+    return LiveTraining(ki, ks_mm * N_PER_MM, ki_train, ks_train, values["fbfnn_rate"],
+                        values["fbfnn_initial_width"], values["fbfnn_train_weights"] == "on")
+
+
+def lsm_map(values: dict, current_a, position_m):
+    """Noise-free LSM factors (k_i [N/A], k_s [N/m]) with the chosen stencil and model: what the networks learn."""
+    return lsm_factors(current_a, position_m, **lsm_kwargs(values))
+
+
+def error_maps(values: dict, ki: FuzzyBasisNetwork, ks: FuzzyBasisNetwork) -> tuple[np.ndarray, np.ndarray]:
+    """|FBFNN − LSM| on the 41×41 test grid (rows x, columns i): k_i [N/A], k_s [N/mm]; their RMS is the test RMSE."""
+    kw = lsm_kwargs(values)
+    _, _, ki_true, ks_true = _test_targets(kw["stencil_a"], kw["stencil_m"], kw["intercept"])
+    return error_heat_map(ki, ki_true), error_heat_map(ks, ks_true, 1 / N_PER_MM)
+
+
 class StiffnessMapSimulation:
     """The ADALINE loop (repeating k_Magnet steps) and the FBFNN training, epoch by epoch."""
 
     sample_time_s = T
     columns = ("k_magnet_estimate", "k_magnet_true", "x_true_m", "x_measured_m", "current_a",
-               "fbfnn_epoch", "fbfnn_test_rmse_ki_n_per_a", "fbfnn_test_rmse_ks_n_per_mm")
+               "fbfnn_epoch", "fbfnn_test_rmse_ki_n_per_a", "fbfnn_test_rmse_ks_n_per_mm",
+               "magnet_force_n", "miso_force_n", "miso_ki_n_per_a", "miso_ks_n_per_mm")
 
     def __init__(self, values: dict):
         self.values = values
         self.loop = LoopSimulation(loop_setup(values, networks(values)), seed=int(values["seed"]))
+        self.miso_weights = np.zeros(2)
+        self.miso_rng = np.random.default_rng(int(values["seed"]) + MISO_SEED_OFFSET)
         self._restart_training(values)
 
+    @property
+    def ki(self) -> FuzzyBasisNetwork:
+        return self.training.ki
+
+    @property
+    def ks(self) -> FuzzyBasisNetwork:
+        return self.training.ks
+
+    @property
+    def epoch(self) -> int:
+        return self.training.epoch
+
     def _restart_training(self, values: dict) -> None:
-        ki, ks_mm = identified_tables(values)
-        self.ki = FuzzyBasisNetwork.from_table(ki, values["fbfnn_initial_width"])
-        self.ks = FuzzyBasisNetwork.from_table(ks_mm * N_PER_MM, values["fbfnn_initial_width"])
-        train_i, train_x = training_grid()
-        self.train = (train_i, train_x, *lsm_factors(train_i, train_x, **lsm_kwargs(values)))
-        self.epoch, self.pending = 0, 0.0
+        self.training = live_training(values)
+        self.pending = 0.0
         self.rmse = test_rmse(values, self.ki, self.ks)
 
     def retuned(self, values: dict) -> StiffnessMapSimulation:
@@ -263,17 +349,16 @@ class StiffnessMapSimulation:
         epochs = min(int(self.pending), int(self.values["fbfnn_epochs"]) - self.epoch)
         if epochs > 0:
             self.pending -= epochs
-            train_i, train_x, ki_train, ks_train = self.train
-            on = self.values["fbfnn_train_weights"] == "on"
-            self.ki.train(train_i, train_x, ki_train, epochs, self.values["fbfnn_rate"], on)
-            self.ks.train(train_i, train_x, ks_train, epochs, self.values["fbfnn_rate"], on)
-            self.epoch += epochs
+            self.training.train(epochs)
             self.rmse = test_rmse(self.values, self.ki, self.ks)
         rows = np.empty((trace.shape[0], 1 + len(self.columns)))
         rows[:, 0] = trace[:, 0]
         for j, name in enumerate(self.columns[:5]):
             rows[:, 1 + j] = column(trace, name)
         rows[:, 6], rows[:, 7], rows[:, 8] = self.epoch, self.rmse[0], self.rmse[1]
+        rows[:, 9] = column(trace, "magnet_force_n")
+        rows[:, 10:13] = miso_estimates(trace, self.values["miso_rate"], self.miso_weights,
+                                        self.values["force_noise_n"], self.miso_rng)
         return rows
 
     def status_message(self) -> str:
@@ -372,6 +457,20 @@ def adaline_plot(run: dict, zero: dict) -> Plot:
                  ("estimate, horizontal axis (F = 0)", zero["estimate"][:t.size], "#7f7f7f")))
 
 
+def miso_plot(run: dict) -> Plot:
+    t = 1e3 * run["t"]
+    return Plot("MISO ADALINE: magnet force F̂ = w_i i + w_s x learnt online from F̂ = 0; k_Magnet steps at 100 ms",
+                "time [ms]", "magnet force [N]", t,
+                (("true F_Magnet", run["force"], "#1f77b4"), ("MISO ADALINE F̂", run["miso"][:, 0], "#d62728")))
+
+
+def miso_weights_plot(run: dict) -> Plot:
+    t = 1e3 * run["t"]
+    return Plot("MISO ADALINE weights: w_i → k_i (well excited), w_s → k_s (x hardly moves: barely learnt)",
+                "time [ms]", "weight [N/A], [N/mm]", t,
+                (("w_i [N/A]", run["miso"][:, 1], "#1f77b4"), ("w_s [N/mm]", run["miso"][:, 2], "#d62728")))
+
+
 # -- claims ---------------------------------------------------------------------------------------------
 
 CLAIMS = (
@@ -406,6 +505,16 @@ CLAIMS = (
           "5.0 to 6.7 covered in 100 ms", "(not discussed)", "adaline_zero_force_progress_percent", (None, 10.0), "%",
           note="The LMS step is proportional to the regressor φ, which vanishes with the force; only the "
                "amplifier's current noise moves it a little (vertical axis: 100 %)."),
+    Claim("paper 002 §C (MISO ADALINE; lab target)", "MISO ADALINE: RMS of F̂ − F_Magnet, 50-100 ms after a "
+          "start at F̂ = 0", "identified online (no number)", "miso_force_rms_error_n.0", (None, 0.05), "N",
+          note="Lab target, not the paper's: 1 % of the force carried (5.08 N); inputs i and the measured x."),
+    Claim("paper 002 §C (MISO ADALINE; lab target)", "MISO ADALINE: RMS of F̂ − F_Magnet, 150-200 ms (after "
+          "the -10 % step of k_Magnet)", "identified online (no number)", "miso_force_rms_error_n.1",
+          (None, 0.05), "N", note="Lab target: 1 % of the force carried."),
+    Claim("paper 002 §C, Table 4 (MISO ADALINE; lab target)", "MISO ADALINE weight w_i at 100 ms (rotor at the "
+          "centre)", "k_i = 10.05 N/A at the centre", "miso_weights_at_step.ki", (9.95, 10.15), "N/A",
+          note="At x = 0 the force law is exactly linear in i (F = k_i i), so the weight must find Table 4's "
+               "centre value; w_s is barely excited there."),
 )
 
 
@@ -420,6 +529,9 @@ class StiffnessMap(Exercise):
         Chart("ADALINE k̂_Magnet (eq. 24)", "N·mm²/A²", (
             Series("estimate", "k_magnet_estimate", 1.0, "#d62728"),
             Series("true", "k_magnet_true", 1.0, "#1f77b4"))),
+        Chart("MISO ADALINE: magnet force", "N", (
+            Series("true F_Magnet", "magnet_force_n", 1.0, "#1f77b4"),
+            Series("MISO F̂", "miso_force_n", 1.0, "#d62728"))),
         Chart("FBFNN test RMSE, k_i", "N/A", (Series("k_i network", "fbfnn_test_rmse_ki_n_per_a", 1.0, "#1f77b4"),)),
         Chart("FBFNN test RMSE, k_s", "N/mm", (Series("k_s network", "fbfnn_test_rmse_ks_n_per_mm", 1.0, "#d62728"),)),
         Chart("Rotor position", "µm", (
@@ -443,6 +555,11 @@ class StiffnessMap(Exercise):
                 "adaline": {"regressor": "φ(i, x) [A²/mm²]", "weight": "k_Magnet [N·mm²/A²]",
                             "rate_mm4_per_a4": values["adaline_rate"]}}
 
+    def open_loops(self, values: dict) -> dict:
+        """The PID that holds the rotor at the centre (on the FBFNN filter's estimate), k_Magnet before its step."""
+        setup_ = loop_setup(values, networks(values))
+        return {f"PID on {setup_.feedback}": loop_at_plant_input(setup_)}
+
     def analyse(self, values: dict):
         ki, ks_mm = identified_tables(values)
         match_4, match_5 = table_matches(ki, ks_mm)
@@ -465,6 +582,8 @@ class StiffnessMap(Exercise):
         rmse_before, rmse_after = test_rmse(values, pair.ki_untrained, pair.ks_untrained), \
             test_rmse(values, pair.ki, pair.ks)
         run, zero = adaline_run(values), adaline_run(values, axis="horizontal")
+        miso = run["miso_summary"]
+        heat_ki, heat_ks = error_maps(values, pair.ki, pair.ks)
         readouts += [
             ("FBFNN k_i: test RMSE untrained", rmse_before[0], "N/A"), ("FBFNN k_i: test RMSE trained", rmse_after[0], "N/A"),
             ("FBFNN k_s: test RMSE untrained", rmse_before[1], "N/mm"),
@@ -473,11 +592,22 @@ class StiffnessMap(Exercise):
             ("ADALINE: time to 1 % after the step", run["after_step_ms"], "ms"),
             ("ADALINE: k̂_Magnet before the step", run["final"], "N·mm²/A²"),
             ("ADALINE, horizontal axis: k̂_Magnet", zero["final"], "N·mm²/A²"),
+            ("FBFNN k_i: largest |FBFNN − LSM| (41×41)", float(np.max(heat_ki)), "N/A"),
+            ("FBFNN k_s: largest |FBFNN − LSM| (41×41)", float(np.max(heat_ks)), "N/mm"),
+            ("MISO ADALINE: RMS F̂ − F, 50-100 ms", miso["rms_error_n"][0], "N"),
+            ("MISO ADALINE: RMS F̂ − F, 150-200 ms", miso["rms_error_n"][1], "N"),
+            ("MISO ADALINE: w_i at 100 ms", miso["weights_end"][0][0], "N/A"),
+            ("MISO ADALINE: w_s at 100 ms", miso["weights_end"][0][1], "N/mm"),
+            ("least squares of the same samples: k_i", miso["lstsq_weights"][0][0], "N/A"),
+            ("least squares of the same samples: k_s", miso["lstsq_weights"][0][1], "N/mm"),
         ]
         notes = [f"ADALINE run: {run['status']}",
                  "Table 4's entry at x = 0.5 mm, i = 0.75 A prints 8.45, its mirror 8.47: compared within ±0.03."]
+        notes.append("3D view: choose the surface with \"3D view shows\"; k_i and k_s show the FBFNN at the "
+                     "scope's training epoch, coloured by |FBFNN − LSM|, and that error on the 41×41 test grid "
+                     "as a heat map on the floor.")
         yield Analysis(readouts, poles, notes, [*plots, *section_plots(values, pair), training_plot(pair),
-                                             adaline_plot(run, zero)])
+                                             adaline_plot(run, zero), miso_plot(run), miso_weights_plot(run)])
 
     def simulation(self, values: dict) -> StiffnessMapSimulation:
         return StiffnessMapSimulation(values)
@@ -512,17 +642,33 @@ class StiffnessMap(Exercise):
             "adaline_zero_force_progress_percent":
                 100 * (zero["final"] - values["adaline_start"]) / (K_MAGNET_PAPER - values["adaline_start"])
                 if K_MAGNET_PAPER != values["adaline_start"] else float("nan"),
+            "fbfnn_error_max": {"ki_n_per_a": float(np.max(error_maps(values, pair.ki, pair.ks)[0])),
+                                "ks_n_per_mm": float(np.max(error_maps(values, pair.ki, pair.ks)[1]))},
+            "miso_force_rms_error_n": run["miso_summary"]["rms_error_n"],
+            "miso_weights_at_step": dict(zip(("ki", "ks"), run["miso_summary"]["weights_end"][0])),
+            "miso_lstsq_weights": run["miso_summary"]["lstsq_weights"],
+            "miso_lstsq_rms_n": run["miso_summary"]["lstsq_rms_n"],
+            "miso_windows_s": [list(w) for w in MISO_WINDOWS_S],
             "status": run["status"], "duration_s": ADALINE_DURATION_S,
         }
+
+    def scene(self, values: dict) -> StiffnessMapScene:
+        return StiffnessMapScene(values, training=live_training, training_key=_network_key, lsm=lsm_map,
+                                 tables=identified_tables)
 
     def live_readouts(self, trace: dict[str, np.ndarray]) -> list[tuple[str, float, str]]:
         if len(trace.get("k_magnet_estimate", ())) == 0:
             return []
+        recent = slice(-round(0.02 / T), None)
+        miso_error = trace["miso_force_n"][recent] - trace["magnet_force_n"][recent]
         return [("k̂_Magnet (now)", float(trace["k_magnet_estimate"][-1]), "N·mm²/A²"),
                 ("k_Magnet (true)", float(trace["k_magnet_true"][-1]), "N·mm²/A²"),
                 ("FBFNN epoch", float(trace["fbfnn_epoch"][-1]), ""),
                 ("FBFNN test RMSE k_i", float(trace["fbfnn_test_rmse_ki_n_per_a"][-1]), "N/A"),
-                ("FBFNN test RMSE k_s", float(trace["fbfnn_test_rmse_ks_n_per_mm"][-1]), "N/mm")]
+                ("FBFNN test RMSE k_s", float(trace["fbfnn_test_rmse_ks_n_per_mm"][-1]), "N/mm"),
+                ("MISO F̂ − F, RMS of the last 20 ms", float(np.sqrt(np.mean(miso_error**2))), "N"),
+                ("MISO w_i (→ k_i)", float(trace["miso_ki_n_per_a"][-1]), "N/A"),
+                ("MISO w_s (→ k_s)", float(trace["miso_ks_n_per_mm"][-1]), "N/mm")]
 
 
 EXERCISE = StiffnessMap()

@@ -43,6 +43,7 @@ from lab_modules.loops.thrust_liftoff_loop import (
     ThrustSimulation,
     liftoff_figures,
     linear_loop,
+    loop_at_plant_input,
 )
 from lab_modules.parameters import Parameter
 from lab_modules.plants.thrust_bearing import TABLE_1
@@ -264,6 +265,10 @@ class ThrustLiftoff(Exercise):
                 "A_exact": Phi_exact.tolist(), "B_exact": B_exact.tolist(),
                 "bias_current_a": b.bias_current_a, "force_constant_n_m2_per_a2": b.force_constant_n_m2_per_a2,
                 "pid_units": "e [mm] -> i_c [A]: Kp [A/mm], Ki [A/(mm s)], Kd [A s/mm]"}
+
+    def open_loops(self, values: dict) -> dict:
+        """The lift-off loop on the linear plant (eq. 5), broken at the current command."""
+        return {f"PID, {values['feedback']} x": loop_at_plant_input(setup(values))}
 
     def analyse(self, values: dict) -> Analysis:
         """Linear figures (poles, Lyapunov noise), the filter's gain history and the noise-free lift-offs."""

@@ -28,11 +28,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import control
 import numpy as np
+import scipy.linalg
 from numba import njit
 
+from lab_modules import analysis
 from lab_modules.estimators.adaline import siso_step
 from lab_modules.estimators.fuzzy_basis_network import CENTRES, evaluate
+from lab_modules.estimators.kalman import correction
 from lab_modules.estimators.scheduled_kalman import (
     N_STATES,
     correct,
@@ -312,13 +316,79 @@ class LoopSimulation:
             self.rng.normal(0.0, np.sqrt(self.setup.plant_force_walk_n2), n_steps)
             if self.setup.plant_force_walk_n2 > 0 else np.zeros(n_steps)])
         out = np.empty((n_steps, 1 + len(COLUMNS)))
+        # a single step (the inspector's) keeps the filters' priors and the measurement for ``filter_state``
+        self._last_correction = ((self.filter_z.copy(), self.filter_P.copy(), self.state[S_XM] + noise[0, 0],
+                                  self.state[S_T]) if n_steps == 1 else None)
         n = run(n_steps, self.state, self.filter_z, self.filter_P, self.physics, self.schedule,
                 self.setup.period_s, self.setup.load_ramp_s, self.controller, self.setup.k_magnet, self.stencil,
                 self.fbf[0], self.fbf[1], self.fbf[2], self.fbf[3], CENTRES, self.adaline, noise, out)
         return out[:n]
+
+    def filter_state(self) -> dict | None:
+        """The filter the controller acts on (the FBFNN-scheduled one under measured feedback)
+        at the sample of the last advance(1): corrected z and P, gain K, innovation and √S
+        (eq. 11-13, H = (0, 0, 0, 1), R = var_sensor)."""
+        if getattr(self, "_last_correction", None) is None:
+            return None
+        z_prior, P_prior, y, time_s = self._last_correction
+        which = FILTERS.index("fbfnn" if self.setup.feedback == "measured" else self.setup.feedback)
+        step = correction(z_prior[which], P_prior[which], [[0.0, 0.0, 0.0, 1.0]], [self.setup.var_sensor_v2], [y])
+        names = {"fixed": "fixed k_i, k_s (§B)", "fbfnn": "k_i, k_s scheduled by the FBFNN (§D)",
+                 "lsm": "k_i, k_s scheduled by the LSM", "ekf": "EKF with the force law eq. 1"}
+        return {"title": f"Kalman filter of the axial bearing (paper 002): {names[FILTERS[which]]}",
+                "time_s": float(time_s), "x": step["x"], "P": step["P"],
+                "states": (("position x", "m"), ("velocity v", "m/s"), ("disturbance force F_St", "N"),
+                           ("sensor state x_M", "V")),
+                "measurements": (("position sensor", "V"),), "K": step["K"], "innovation": step["innovation"],
+                "innovation_sigma": np.sqrt(np.diag(step["S"]))}
 
     def status_message(self) -> str:
         if self.state[S_STOPPED] > 0:
             return f"Touchdown: the rotor reached the retainer bearing at ±{TOUCHDOWN_M * 1e3:g} mm."
         return ""
 
+
+
+# -- the loop linearised at the centre, broken at the plant input (margins, |S|max) ---------------
+def loop_at_plant_input(setup: LoopSetup) -> control.StateSpace:
+    """Open loop L broken at the current command (S = 1 / (1 + L)), linearised at rest at the
+    centre (x = 0, no load, the current that holds the weight): plant eq. 1-2 with its tangent
+    factors there (eq. 3-4) and the sensor lag eq. 18, by a zero-order hold (current held, as the
+    kernel's RK4); the PID as ``run`` computes it, on the measurement (filtered difference) or on
+    the chosen filter's position and velocity.  That filter is its steady state (eq. 9-13, scipy's
+    Riccati solver) on the model ``model_matrices`` builds with its factors at the operating point:
+    centre values (fixed), the FBFNN's or the exact LSM's there, or the tangent ones (EKF); the
+    scheduling's own derivatives are left out.  Amplifier noise and limits are not in it."""
+    physics = setup.physics()
+    T, m, gap, bias = physics[1], AXIAL.mass_kg, physics[9], physics[10]
+    kp, ti, kd, tf, _tr, current = setup.controller()[:6]
+    k_i, k_s = tangent_factors(current, 0.0, setup.k_magnet, gap, bias)
+    F = np.array([[0.0, 1.0, 0.0], [k_s / m, 0.0, 0.0],
+                  [SENSOR_GAIN_V_PER_M / setup.sensor_lag_s, 0.0, -1.0 / setup.sensor_lag_s]])
+    plant = control.c2d(control.ss(F, [[0.0], [k_i / m], [0.0]], [[0.0, 0.0, 1.0]], 0.0), T, "zoh")
+    if setup.feedback == "measured":
+        def step(c, y):                          # c = (integral, derivative, previous position)
+            position = y[0] / SENSOR_GAIN_V_PER_M
+            derivative = (tf * c[1] + position - c[2]) / (tf + T)
+            integral = c[0] - position * T
+            return np.array([integral, derivative, position]), np.array([kp * (-position + integral / ti)
+                                                                         - kd * derivative])
+        return analysis.loop_at_plant_input(plant, analysis.state_space_from_step(step, 3, 1, T))
+    factors = {"fixed": (4 * physics[8] * bias / gap**2, 4 * physics[8] * bias**2 / gap**3),
+               "fbfnn": (evaluate(current, 0.0, CENTRES, *setup.fbfnn_ki), evaluate(current, 0.0, CENTRES, *setup.fbfnn_ks)),
+               "lsm": lsm_factors_at(current, 0.0, setup.stencil_a, setup.stencil_m, physics[8], gap, bias),
+               "ekf": tangent_factors(current, 0.0, physics[8], gap, bias)}[setup.feedback]
+    A, B, Q = np.zeros((N_STATES, N_STATES)), np.zeros((N_STATES, 2)), np.zeros((N_STATES, N_STATES))
+    model_matrices(float(factors[0]), float(factors[1]), physics, A, B)
+    process_noise(physics, B, Q)
+    H = np.zeros((1, N_STATES))
+    H[0, 3] = 1.0
+    P = scipy.linalg.solve_discrete_are(A.T, H.T, Q, np.array([[setup.var_sensor_v2]]))
+    K = (P @ H.T / (H @ P @ H.T + setup.var_sensor_v2))[:, 0]
+
+    def step(c, y):                              # c = (filter prediction z_p (4), integral)
+        z = c[:N_STATES] + K * (y[0] - c[3])
+        integral = c[N_STATES] - z[0] * T
+        command = kp * (-z[0] + integral / ti) - kd * z[1]
+        return np.append(A @ z + B[:, 0] * command, integral), np.array([command])
+    return analysis.loop_at_plant_input(plant, analysis.state_space_from_step(step, N_STATES + 1, 1, T))

@@ -23,11 +23,14 @@ from dataclasses import dataclass, field, replace
 import control
 import numba
 import numpy as np
+import scipy.linalg
 
+from lab_modules import analysis
 from lab_modules.controllers.feedback_linearisation import feedback_gain, linearising_control
 from lab_modules.controllers.lead_lag import LEAD_LAG, LeadLag
 from lab_modules.controllers.pid import controller_step
 from lab_modules.estimators.continuous_discrete_ekf import bucy_step, propagate, update
+from lab_modules.estimators.kalman import correction
 from lab_modules.plants.maglev_ball import TABLE_3_1, MaglevPlant, rk4_step
 
 OK, STRUCK_MAGNET, FELL, DIVERGED = 0, 1, 2, 3
@@ -248,6 +251,7 @@ class MaglevSimulation:
         self.u0 = setup.plant.equilibrium_voltage_v(setup.reference.base_m)
         self.steps = 0
         self.status = OK
+        self._last_correction = None                   # (prior x̂, prior P, y, time) of the last sample
 
     def advance(self, n_steps: int) -> np.ndarray:
         if self.status != OK or n_steps <= 0:
@@ -256,13 +260,41 @@ class MaglevSimulation:
         refs = self.references.next(n_steps)
         noise = self.rng.standard_normal((n_steps, 3))
         trace = np.empty((n_steps, 1 + len(TRACE_COLUMNS)))
-        done, self.status = run(
-            n_steps, self.steps * self.sample_time_s, self.x, self.x_hat, self.P, self.xc, refs, noise,
-            self.true_constants, self.constants, self.k, np.asarray(s.filter_Q, dtype=float), np.diag(s.plant_Q).astype(float),
-            s.sensor_noise_m**2, self.sample_time_s, CONTROLLERS.index(s.controller),
-            FILTERS.index(s.filter), s.filter_substeps, *self.lead_lag, self.u0, trace)
+        Q, plant_q = np.asarray(s.filter_Q, dtype=float), np.diag(s.plant_Q).astype(float)
+
+        def part(first: int, last: int) -> tuple[int, int]:
+            return run(
+                last - first, (self.steps + first) * self.sample_time_s, self.x, self.x_hat, self.P, self.xc,
+                refs[first:last], noise[first:last], self.true_constants, self.constants, self.k, Q, plant_q,
+                s.sensor_noise_m**2, self.sample_time_s, CONTROLLERS.index(s.controller),
+                FILTERS.index(s.filter), s.filter_substeps, *self.lead_lag, self.u0, trace[first:last])
+
+        if n_steps == 1:                               # a single step (the inspector's) keeps the prior
+            prior = self.x_hat.copy(), self.P.copy()
+            done, self.status = part(0, 1)
+            self._last_correction = (*prior, np.array([trace[0, 1 + COLUMN["x_measured_m"]]]), trace[0, 0])
+        else:
+            done, self.status = part(0, n_steps)
+            self._last_correction = None
         self.steps += done
         return trace[:done]
+
+    def filter_state(self) -> dict | None:
+        """The continuous-discrete EKF (eq. 2.40-2.42, H = [1 0 0]) at the sample of the last advance(1): corrected
+        x̂ and P, gain K, innovation and √S.  The continuous-time filters correct continuously
+        (no sample gain): their x̂ and P only."""
+        if self._last_correction is None:
+            return None
+        x_prior, P_prior, y, time_s = self._last_correction
+        state = {"title": f"{self.setup.filter} EKF of the maglev ball (paper 004 §2.5)", "time_s": float(time_s),
+                 "states": (("air gap x₁", "m"), ("ball velocity x₂", "m/s"), ("coil current x₃", "A")),
+                 "measurements": (("position sensor", "m"),)}
+        if self.setup.filter != FILTERS[0]:
+            return {**state, "x": self.x_hat.copy(), "P": self.P.copy(), "K": None, "innovation": None,
+                    "innovation_sigma": None}
+        step = correction(x_prior, P_prior, [[1.0, 0.0, 0.0]], [self.setup.sensor_noise_m**2], y)
+        return {**state, "x": step["x"], "P": step["P"], "K": step["K"], "innovation": step["innovation"],
+                "innovation_sigma": np.sqrt(np.diag(step["S"]))}
 
     def status_message(self) -> str:
         if self.status == OK:
@@ -331,3 +363,69 @@ def record_lead_lag_run(duration_s: float = 6.0, still_s: float = 1.0, sensor_no
 #: visible wandering of the hardware's recording (Fig. 3.25); 1e-8 A^2/s on
 #: the current is eq. 3.4's Q_33.
 RECORDING_PLANT_Q = np.diag([0.0, 2e-4, 1e-8])
+
+
+# -- the loop linearised at the operating point, broken at the plant input (margins, |S|max) -------
+def state_feedback_gain(setup: MaglevSetup) -> np.ndarray:
+    """du/dx_hat of the feedback-linearising control (eq. 2.23, 2.30) at the equilibrium at the
+    reference's base gap (reference at rest): central differences, steps 1e-6 of each state's scale."""
+    p, gap = setup.plant.constants(), setup.reference.base_m
+    x0 = np.array([gap, 0.0, setup.plant.equilibrium_current_a(gap)])
+    reference = np.array([gap, 0.0, 0.0, 0.0])
+    steps = 1e-6 * np.array([gap, 1.0, x0[2]])
+    gain = np.empty(3)
+    for j in range(3):
+        e = np.zeros(3)
+        e[j] = steps[j]
+        gain[j] = (linearising_control(x0 + e, reference, setup.gain, p)[0]
+                   - linearising_control(x0 - e, reference, setup.gain, p)[0]) / (2 * steps[j])
+    return gain
+
+
+def _discrete_noise(F: np.ndarray, Q: np.ndarray, dt: float) -> np.ndarray:
+    """Q_d = integral_0^dt e^{F s} Q e^{F^T s} ds (Van Loan): what eq. 2.45 adds to P over dt."""
+    n = F.shape[0]
+    M = scipy.linalg.expm(np.block([[-F, Q], [np.zeros((n, n)), F.T]]) * dt)
+    Phi = M[n:, n:].T
+    return Phi @ M[:n, n:]
+
+
+def loop_at_plant_input(setup: MaglevSetup) -> control.StateSpace:
+    """Open loop L broken at the coil voltage (S = 1 / (1 + L)), everything linearised at the
+    equilibrium at the reference's base gap (eq. 2.13-2.14), plant (the true one) by a zero-order
+    hold at dt.  The lead-lag acts on the measured gap; feedback linearisation is the state
+    feedback du/dx_hat (``state_feedback_gain``) on the filter's steady state at that point:
+    continuous-discrete (eq. 2.40-2.45: correction, control, propagation over dt) or the
+    continuous-time filter (Kalman-Bucy gain of the continuous Riccati equation, its
+    equations held over dt with u and y, the control read before the step)."""
+    dt, gap = setup.plant.sample_time_s, setup.reference.base_m
+    true = setup.true_plant or setup.plant
+    plant = control.c2d(true.linear_model(gap), dt, "zoh")
+    if setup.controller == "lead-lag":
+        compensator = setup.lead_lag.discrete(dt)            # u = u0 + C(z) (y - y_R)
+        return analysis.loop_at_plant_input(plant, compensator)
+    model = setup.plant.linear_model(gap)
+    F, B, H = (np.asarray(M) for M in (model.A, model.B, model.C))
+    r, gain = setup.sensor_noise_m ** 2, state_feedback_gain(setup)
+    Q = np.asarray(setup.filter_Q, dtype=float)
+    if setup.filter == "continuous-discrete":
+        discrete = control.c2d(model, dt, "zoh")
+        Ad, Bd = np.asarray(discrete.A), np.asarray(discrete.B)
+        P = scipy.linalg.solve_discrete_are(Ad.T, H.T, _discrete_noise(F, Q, dt), np.array([[r]]))
+        K = P @ H.T / (H @ P @ H.T + r)
+
+        def step(x_p, y):
+            x_hat = x_p + K[:, 0] * (y[0] - x_p[0])
+            u = gain @ x_hat
+            return Ad @ x_hat + Bd[:, 0] * u, np.array([u])
+    else:
+        r_c = r if setup.filter == "continuous-time" else r * dt
+        P = scipy.linalg.solve_continuous_are(F.T, H.T, Q, np.array([[r_c]]))
+        Kc = P @ H.T / r_c
+        held = control.c2d(control.ss(F - Kc @ H, np.hstack([B, Kc]), np.eye(3), np.zeros((3, 2))), dt, "zoh")
+        Af, Bf = np.asarray(held.A), np.asarray(held.B)
+
+        def step(x_hat, y):
+            u = gain @ x_hat
+            return Af @ x_hat + Bf[:, 0] * u + Bf[:, 1] * y[0], np.array([u])
+    return analysis.loop_at_plant_input(plant, analysis.state_space_from_step(step, 3, 1, dt))

@@ -27,9 +27,11 @@ import numba
 import numpy as np
 from scipy.signal import max_len_seq
 
+from lab_modules import analysis
 from lab_modules.controllers.pid import controller_step
 from lab_modules.estimators import extended_kalman as ef
 from lab_modules.estimators.extended_kalman import N_STATES
+from lab_modules.estimators.kalman import correction
 from lab_modules.loops.radial_axis_loop import _rk4_step
 from lab_modules.plants.radial_bearing import RIG, BearingAxis
 
@@ -256,6 +258,7 @@ class EKFLoopSimulation:
                              if setup.feedforward else 0.0)
         self.step = 0
         self.status = OK
+        self._last_correction = None                   # (prior x̂, prior P, y, time) of the last sample
 
     def retuned(self, setup: EKFLoopSetup) -> EKFLoopSimulation:
         """A simulation with new settings that carries on from this one's state
@@ -287,14 +290,44 @@ class EKFLoopSimulation:
         disturbance = np.ascontiguousarray(setup.disturbance(t - setup.input_start_s), dtype=float)
         noise = self.rng.standard_normal((n_steps, 4))
         trace = np.empty((n_steps, len(TRACE_COLUMNS)))
-        status, done = run(n_steps, setup.model, self.plant, self._plant_physics, self.x_hat, self.P,
-                           self._Q, self._R_diag, self._C, self._filter_physics,
-                           self.ctrl, *self._ctrl_matrices, self._u_limit, setup.use_estimate,
-                           self._feedforward, reference, disturbance, noise, setup.noise_sigma,
-                           setup.rig.touchdown_m, trace)
+
+        def part(first: int, last: int) -> tuple[int, int]:
+            return run(last - first, setup.model, self.plant, self._plant_physics, self.x_hat, self.P,
+                       self._Q, self._R_diag, self._C, self._filter_physics,
+                       self.ctrl, *self._ctrl_matrices, self._u_limit, setup.use_estimate,
+                       self._feedforward, reference[first:last], disturbance[first:last], noise[first:last],
+                       setup.noise_sigma, setup.rig.touchdown_m, trace[first:last])
+
+        if n_steps == 1:                               # a single step (the inspector's) keeps the prior
+            prior, plant = (self.x_hat.copy(), self.P.copy()), self.plant.copy()
+            status, done = part(0, 1)
+            K_mx, K_mi = self._plant_physics[9], self._plant_physics[10]
+            y = np.array([K_mx * plant[3] + setup.noise_sigma[2] * noise[0, 2],
+                          K_mi * plant[2] + setup.noise_sigma[3] * noise[0, 3]])
+            self._last_correction = (*prior, y, t[0])
+        else:
+            status, done = part(0, n_steps)
+            self._last_correction = None
         self.step += done
         self.status = status
         return np.column_stack([t[:done], trace[:done]])
+
+    def filter_state(self) -> dict | None:
+        """The EKF at the sample of the last advance(1): corrected x̂ and P, gain K, innovation and √S
+        (eq. 6; the measurement is linear, G = Gamma of eq. 9/14)."""
+        if self._last_correction is None:
+            return None
+        x_prior, P_prior, y, time_s = self._last_correction
+        step = correction(x_prior, P_prior, self._C, self._R_diag, y)
+        nonlinear = self.setup.model == ef.NONLINEAR
+        states = (("position x", "m"), ("velocity v", "m/s"), ("coil current i", "A")) + (
+            (("sensed position x_d (lag)", "m"), ("disturbance force f_z", "N")) if nonlinear else
+            (("current factor k_i", "N/A"), ("force-displacement factor k_x", "N/m")))
+        return {"title": ("Extended Kalman filter, disturbance model (paper 000 §III-B)" if nonlinear else
+                          "Extended Kalman filter, parameter model (paper 000 §III-A)"),
+                "time_s": float(time_s), "states": states, "x": step["x"], "P": step["P"],
+                "measurements": (("position sensor", "V"), ("current sensor", "V")),
+                "K": step["K"], "innovation": step["innovation"], "innovation_sigma": np.sqrt(np.diag(step["S"]))}
 
     def status_message(self) -> str:
         """'' while running; what stopped the simulation otherwise."""
@@ -314,3 +347,56 @@ class EKFLoopSimulation:
 def column(trace: np.ndarray, name: str) -> np.ndarray:
     """One named column of a trace returned by ``advance`` (column 0 is time)."""
     return trace[:, 1 + TRACE_COLUMNS.index(name)]
+
+
+# -- the loop linearised at rest, broken at the plant input (margins, |S|max) ---------------------
+def rest_current_a(rig: BearingAxis, position_m: float) -> float:
+    """Control current [A] that holds the rotor at rest at ``position_m`` without load:
+    f_m(x, i) = 0 of eq. 10, by Newton's method."""
+    physics = ef.physics_vector(rig)
+    current = 0.0
+    for _ in range(20):
+        _kx, ki = ef.local_factors(position_m, current, physics)
+        current -= rig.magnetic_force(position_m, current) / ki
+    return current
+
+
+def loop_at_plant_input(setup: EKFLoopSetup, position_m: float = 0.0) -> control.StateSpace:
+    """Open loop L (broken at i_ref, S = 1 / (1 + L)) of ``setup`` linearised at rest at
+    ``position_m``: the plant is eq. 10-12 with the local k_x, k_i of eq. 10 there; the
+    EKF is replaced by its steady state on the model it linearises (eq. 7), at the same point:
+
+    * ``LINEARISED`` (§III-A): once the parameter estimates have converged to the local
+      k_i, k_x they stay put (their random walk is slow), so the filter acts as the linear
+      Kalman filter of eq. 2 on (x, v, i) with those factors;
+    * ``NONLINEAR`` (§III-B): the 5-state model (x, v, i, x_d, f_z) with F of eq. 14 at rest,
+      Phi and Gamma by a zero-order hold; the force feedforward -f_z_hat / (k_i K_a), when on,
+      is a state feedback on f_z_hat.
+
+    The PID, the feedback source (measured or estimated) and the filter's Q, R are the set-up's;
+    the amplifier limit is left out (a linear analysis)."""
+    rig = setup.rig
+    kx, ki = rig.local_factors(position_m, rest_current_a(rig, position_m))
+    local = replace(rig, kx_n_per_m=float(kx), ki_n_per_a=float(ki))   # the linear model reads only these
+    plant = local.discrete_model(setup.plant_sensor_lag_s)
+    R = np.diag(setup.filter_R_diag)
+    state_gain = None
+    if setup.model == ef.LINEARISED:
+        filter_model = local.discrete_model(0.0)
+        Q = np.asarray(setup.filter_Q)[:3, :3]
+    else:
+        physics = ef.physics_vector(rig, setup.filter_sensor_lag_s)
+        F = np.zeros((N_STATES, N_STATES))
+        ef.jacobian(ef.NONLINEAR, np.array([position_m, 0.0, rest_current_a(rig, position_m), position_m, 0.0]),
+                    physics, F)
+        B = np.zeros((N_STATES, 1))
+        B[2, 0] = rig.amplifier_gain_a_per_v / rig.amplifier_lag_s
+        filter_model = control.c2d(control.ss(F, B, ef.measurement_matrix(ef.NONLINEAR, rig),
+                                              np.zeros((2, 1))), rig.sample_time_s, "zoh")
+        Q = np.asarray(setup.filter_Q)
+        if setup.feedforward:
+            state_gain = np.zeros(N_STATES)
+            state_gain[4] = 1.0 / (rig.ki_n_per_a * rig.amplifier_gain_a_per_v)   # u = ... - K_s x_hat
+    K, _ = analysis.steady_state_kalman(filter_model, Q, R)
+    compensator = analysis.compensator(filter_model, setup.controller, K, setup.use_estimate, state_gain)
+    return analysis.loop_at_plant_input(plant, compensator)

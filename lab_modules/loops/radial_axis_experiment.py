@@ -16,7 +16,7 @@ import numpy as np
 import scipy.signal
 
 from lab_modules import analysis
-from lab_modules.estimators.kalman import KalmanFilter, pad_vector
+from lab_modules.estimators.kalman import KalmanFilter, correction, pad_vector
 from lab_modules.loops import radial_axis_loop
 from lab_modules.plants.radial_bearing import RIG, BearingAxis
 
@@ -116,6 +116,12 @@ class AxisSetup:
             loop = analysis.with_reference_filter(loop, self.reference_filter)
         return loop
 
+    def loop_matrix(self, gain_factor: float = 1.0) -> np.ndarray:
+        """State matrix of the loop's states in the feedback (``loop_poles`` are its eigenvalues),
+        affine in ``gain_factor`` (the pole map's root locus)."""
+        loop = self.loop(gain_factor=gain_factor)
+        return np.asarray(loop.system.A)[loop.loop_states, loop.loop_states]
+
     def loop_at_plant_input(self, gain_factor: float = 1.0) -> control.StateSpace:
         """Open loop L broken at the plant input (i_ref): plant, filter, controller and state
         feedback in series, sign included, so S = 1 / (1 + L) (for margins and |S|max)."""
@@ -203,6 +209,7 @@ class AxisSimulation:
         self._u_limit = rig.current_limit_a / rig.amplifier_gain_a_per_v
         self.step = 0
         self.status = radial_axis_loop.OK
+        self._last_correction = None                   # (prior x̂, prior P, y, time) of the last sample
         self._reference_filter = None                  # (numerator, denominator, filter state)
         if setup.reference_filter is not None:
             transfer = control.ss2tf(setup.reference_filter)
@@ -260,14 +267,44 @@ class AxisSimulation:
         noise = self.noise(n_steps)
         trace = np.empty((n_steps, len(radial_axis_loop.TRACE_COLUMNS) + 1))
         kf = self.filter
-        status, done = radial_axis_loop.run(
-            n_steps, self.step, self.plant, *self._plant_linear, self.setup.nonlinear, self._physics,
-            kf._x, kf.P, kf.A, kf.B, kf.C, kf.Q, kf.R_diag,
-            self.ctrl, *self._ctrl_matrices, self._state_gain, self._u_limit, self.setup.use_estimate,
-            reference, disturbance, noise, self.setup.noise_sigma, self.setup.rig.touchdown_m, trace)
+
+        def run(first: int, last: int) -> tuple[int, int]:
+            return radial_axis_loop.run(
+                last - first, self.step + first, self.plant, *self._plant_linear, self.setup.nonlinear,
+                self._physics, kf._x, kf.P, kf.A, kf.B, kf.C, kf.Q, kf.R_diag,
+                self.ctrl, *self._ctrl_matrices, self._state_gain, self._u_limit, self.setup.use_estimate,
+                reference[first:last], disturbance[first:last], noise[first:last], self.setup.noise_sigma,
+                self.setup.rig.touchdown_m, trace[first:last])
+
+        if n_steps == 1:                               # a single step (the inspector's) keeps the prior
+            prior = kf._x.copy(), kf.P.copy()
+            status, done = run(0, 1)
+            sigma, row = self.setup.noise_sigma, trace[0]
+            self._last_correction = (*prior, np.array([row[2] * self._physics[9], row[5] * self._physics[10]
+                                                       + sigma[3] * float(noise[0, 3])]), row[0])
+        else:
+            status, done = run(0, n_steps)
+            self._last_correction = None
         self.step += done
         self.status = status
         return trace[:done]
+
+    STATE_LABELS = (("position x", "m"), ("velocity v", "m/s"), ("coil current i", "A"),
+                    ("sensed position x_d (lag)", "m"))
+
+    def filter_state(self) -> dict | None:
+        """The linear Kalman filter (eq. 2) at the sample of the last advance(1): its corrected estimate x̂ and P,
+        the gain K, the innovation and its predicted σ = √S (see ``Simulation.filter_state``)."""
+        if self._last_correction is None:
+            return None
+        x_prior, P_prior, y, time_s = self._last_correction
+        n, kf = self.filter.dim_x, self.filter
+        step = correction(x_prior[:n], P_prior[:n, :n], kf.C[:, :n], kf.R_diag, y)
+        return {"title": "Linear Kalman filter (paper 000, eq. 2)", "time_s": float(time_s),
+                "states": self.STATE_LABELS[:n], "x": step["x"], "P": step["P"],
+                "measurements": (("position sensor", "V"), ("current sensor", "V")),
+                "K": step["K"], "innovation": step["innovation"],
+                "innovation_sigma": np.sqrt(np.diag(step["S"]))}
 
     def noise(self, n_steps: int) -> np.ndarray:
         """The next ``n_steps`` x 4 standard normal draws (process v, process i,

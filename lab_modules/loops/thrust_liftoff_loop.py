@@ -28,12 +28,14 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from functools import cached_property
 
+import control
 import numba
 import numpy as np
 import scipy.linalg
 import scipy.signal
 
-from lab_modules.estimators.kalman import STATE_SIZE, predict, update
+from lab_modules import analysis
+from lab_modules.estimators.kalman import STATE_SIZE, correction, predict, update
 from lab_modules.estimators.thrust_kalman import H, ThrustFilterDesign
 from lab_modules.plants.thrust_bearing import GRAVITY_M_PER_S2, TABLE_1, ThrustBearing, discrete_current_loop
 
@@ -292,12 +294,23 @@ class ThrustSimulation:
             noise[:, 0] = self._colour(noise[:, 0], np.exp(-b.sample_time_s / s.sensor_noise_correlation_s))
         trace = np.empty((n_steps, 1 + len(self.columns)))
         G_A, G_B, G_C, G_D = self._current
-        status, done = run(n_steps, self.step, b.sample_time_s, self.plant, self._constants,
-                           self._plant[0], self._plant[1], s.nonlinear, s.gravity_n,
-                           self.coil, G_A, G_B, G_C, G_D, s.current_loop,
-                           kf._x, kf.P, kf.A, kf.B, kf.C, kf.Q, kf.R_diag,
-                           self.pid, self._gains, s.use_estimate, s.derivative_from_velocity,
-                           noise, self._sigma, b.touchdown_clearance_m, self.memory, trace)
+
+        def part(first: int, last: int) -> tuple[int, int]:
+            return run(last - first, self.step + first, b.sample_time_s, self.plant, self._constants,
+                       self._plant[0], self._plant[1], s.nonlinear, s.gravity_n,
+                       self.coil, G_A, G_B, G_C, G_D, s.current_loop,
+                       kf._x, kf.P, kf.A, kf.B, kf.C, kf.Q, kf.R_diag,
+                       self.pid, self._gains, s.use_estimate, s.derivative_from_velocity,
+                       noise[first:last], self._sigma, b.touchdown_clearance_m, self.memory, trace[first:last])
+
+        if n_steps == 1:                               # a single step (the inspector's) keeps the prior
+            prior = kf._x.copy(), kf.P.copy()
+            y = np.array([self.plant[0] + self._sigma[0] * noise[0, 0]])     # eq. 13: Z = x + V
+            status, done = part(0, 1)
+            self._last_correction = (*prior, y, trace[0, 0])
+        else:
+            status, done = part(0, n_steps)
+            self._last_correction = None
         trace[:done, 1 + len(KERNEL_COLUMNS):] = self._lines
         self.step += done
         self.status = status
@@ -311,6 +324,21 @@ class ThrustSimulation:
                                           zi=[a * getattr(self, "_coloured_last", self.rng.standard_normal())])
         self._coloured_last = out[-1]
         return out
+
+    def filter_state(self) -> dict | None:
+        """The Kalman filter (§3, eq. 13) at the sample of the last advance(1): corrected x̂ and P, gain K,
+        innovation and √S (see ``Simulation.filter_state``)."""
+        correction_in = getattr(self, "_last_correction", None)
+        if correction_in is None:
+            return None
+        x_prior, P_prior, y, time_s = correction_in
+        kf = self.filter
+        n = kf.dim_x
+        step = correction(x_prior[:n], P_prior[:n, :n], kf.C[:, :n], kf.R_diag, y)
+        return {"title": "Kalman filter of the thrust bearing (paper 003 §3)", "time_s": float(time_s),
+                "states": (("collar position x", "m"), ("collar velocity v", "m/s")), "x": step["x"],
+                "P": step["P"], "measurements": (("position sensor Z", "m"),), "K": step["K"],
+                "innovation": step["innovation"], "innovation_sigma": np.sqrt(np.diag(step["S"]))}
 
     def run(self, duration_s: float) -> dict[str, np.ndarray]:
         """``duration_s`` of simulation as columns (and ``time_s``)."""
@@ -379,18 +407,13 @@ class LinearLoop:
 OUTPUTS = ("x_true_m", "x_measured_m", "x_estimated_m", "current_command_a")
 
 
-def linear_loop(setup: ThrustSetup, current_loop: bool | None = None, with_filter: bool = True) -> LinearLoop:
-    """``LinearLoop`` of ``setup`` (G(s) as set, or forced on/off by ``current_loop``).
-
-    Built by pushing unit vectors through one step written like the kernel's, so the
-    pole map and the noise analysis describe the loop that runs.  ``with_filter=False``
-    drops the filter's states (only allowed for measured feedback, where the filter
-    is outside the loop)."""
+def _linear_step(setup: ThrustSetup, with_g: bool, with_filter: bool):
+    """(number of states, step): one sample of ``run`` on the linear plant, without saturation or
+    stops, written like the kernel.  ``step(state, noise, injected=None)`` returns (next state,
+    outputs ``OUTPUTS``); with ``injected`` the plant side (G(s), coil, filter prediction with the
+    measured current) is driven by it instead of the PID's command: the loop broken at the plant input."""
     s, b = setup, setup.bearing
     T = b.sample_time_s
-    with_g = s.current_loop if current_loop is None else current_loop
-    if not with_filter and s.use_estimate:
-        raise ValueError("the filter is inside the loop when the estimate is fed back")
     Phi, _, Gamma = b.exact_discretisation()
     G_A, G_B, G_C, G_D = discrete_current_loop(T)
     Phi_f, B_f, _ = s.design.matrices
@@ -399,7 +422,7 @@ def linear_loop(setup: ThrustSetup, current_loop: bool | None = None, with_filte
     o = 4 if with_g else 2                         # index of the integral
     n = o + 3 + (2 if with_filter else 0)
 
-    def step(state, noise):
+    def step(state, noise, injected=None):
         x = state[:2]
         g = state[2:4] if with_g else np.zeros(2)
         integral, previous, d_term = state[o], state[o + 1], state[o + 2]
@@ -411,21 +434,47 @@ def linear_loop(setup: ThrustSetup, current_loop: bool | None = None, with_filte
                  else s.derivative_a_s_per_m * (e - previous) / T)
         d_new = alpha * d_term + (1 - alpha) * raw_d
         command = s.proportional_a_per_m * e + integral + d_new
-        i = G_C @ g + G_D * command if with_g else command
+        drive = command if injected is None else injected
+        i = G_C @ g + G_D * drive if with_g else drive
         out = np.empty(n)
         out[:2] = Phi @ x + Gamma * (b.current_stiffness_n_per_a * i + noise[1])
         if with_g:
-            out[2:4] = G_A @ g + G_B * command
+            out[2:4] = G_A @ g + G_B * drive
         out[o], out[o + 1], out[o + 2] = integral + s.integral_a_per_m_s * T * e, e, d_new
         if with_filter:
             out[o + 3:o + 5] = Phi_f @ x_corr + B_f * i
         return out, np.array([x[0], z, x_corr[0], command])
+    return n, step
 
+
+def linear_loop(setup: ThrustSetup, current_loop: bool | None = None, with_filter: bool = True) -> LinearLoop:
+    """``LinearLoop`` of ``setup`` (G(s) as set, or forced on/off by ``current_loop``).
+    Built by pushing unit vectors through one step written like the kernel's, so the
+    pole map and the noise analysis describe the loop that runs.  ``with_filter=False``
+    drops the filter's states (only allowed for measured feedback, where the filter
+    is outside the loop)."""
+    with_g = setup.current_loop if current_loop is None else current_loop
+    if not with_filter and setup.use_estimate:
+        raise ValueError("the filter is inside the loop when the estimate is fed back")
+    n, step = _linear_step(setup, with_g, with_filter)
     zero_state, zero_noise = np.zeros(n), np.zeros(2)
     by_state = [step(column, zero_noise) for column in np.eye(n)]
     by_noise = [step(zero_state, column) for column in np.eye(2)]
     return LinearLoop(M=np.column_stack([r[0] for r in by_state]), N=np.column_stack([r[0] for r in by_noise]),
                       C=np.column_stack([r[1] for r in by_state]), D=np.column_stack([r[1] for r in by_noise]))
+
+
+def loop_at_plant_input(setup: ThrustSetup) -> control.StateSpace:
+    """Open loop L broken at the current command i_c (S = 1 / (1 + L)): the linear loop of
+    ``linear_loop`` with a signal injected where the plant side reads the command and the PID's
+    command read back, sign included.  The filter's prediction uses the measured coil current,
+    so the filter sits on both sides of the break only through its states."""
+    n, step = _linear_step(setup, setup.current_loop, True)
+
+    def broken(state, injected):
+        state_next, outputs = step(state, np.zeros(2), injected[0])
+        return state_next, outputs[3:]            # the current command
+    return -analysis.state_space_from_step(broken, n, 1, setup.bearing.sample_time_s)
 
 
 def liftoff_figures(trace: dict[str, np.ndarray], start_m: float, column: str = "x_true_m") -> dict:

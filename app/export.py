@@ -1,0 +1,166 @@
+"""Export for a lab report: the scope window as CSV, each scope chart as PNG and the
+readouts as CSV, from buttons under the Scope tab's readouts.
+
+Everything is made on the server from the tab's scope buffer (the samples the
+charts show, every sample, not the thinned points sent to the browser), so a
+file holds exactly what the student saw and the tests can check it.  The PNGs
+are drawn by matplotlib (``matplotlib.figure`` only, no pyplot, Agg canvas)
+like the scope: the same series, colours, units and ±3σ band.  File names
+carry the exercise, the tab's experiment code (``app/store.py``) when it has
+one, and the server's local time: ``kalman_noise_KN-7Q3M_20261123-141502_scope.csv``.
+"""
+
+from __future__ import annotations
+
+import io
+import re
+import time
+
+import numpy as np
+import viser
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from lab_modules.exercises import Analysis, Chart, Exercise
+from lab_modules.exercises._figures import draw_chart
+
+#: Unit tokens at the end of a column name (``x_true_m``, ``ki_true_n_per_a``) and their symbols
+UNIT_TOKENS = {"m": "m", "mm": "mm", "s": "s", "a": "A", "v": "V", "n": "N", "h": "H"}
+_UNIT = re.compile(r"_(m|mm|s|a|v|n|h)(?:_per_(m|mm|s|a|v|n|h))?$")
+_LOOP_SUFFIX = re.compile(r"_(lqg|pid)$")          # lqg_vs_pid's side-by-side columns: x_true_m_lqg
+PNG_DPI = 150
+FIGURE_IN = (8.0, 3.6)                             # width, height [inch]
+
+
+def column_unit(name: str, charts: tuple[Chart, ...] = ()) -> str:
+    """The SI unit of a trace column, read from its name's suffix (``_m``, ``_n_per_a``,
+    ``_m_per_s``); a column without one takes the unit of a chart that plots it unscaled,
+    else it is a pure number ("1")."""
+    match = _UNIT.search(_LOOP_SUFFIX.sub("", name))
+    if match:
+        numerator, denominator = match.groups()
+        unit = UNIT_TOKENS[numerator]
+        return f"{unit}/{UNIT_TOKENS[denominator]}" if denominator else unit
+    for chart in charts:
+        for series in chart.series:
+            if series.column == name and series.scale == 1.0:
+                return chart.unit
+    return "1"
+
+
+def _number(value: float) -> str:
+    """Shortest text that reads back as the same float (``repr``)."""
+    return repr(float(value))
+
+
+def _csv_field(text: str) -> str:
+    text = str(text)
+    return '"' + text.replace('"', '""') + '"' if any(c in text for c in ',"\n') else text
+
+
+def _comments(exercise: Exercise, code: str | None, values: dict) -> list[str]:
+    settings = "; ".join(f"{p.name} = {values[p.name]}{' ' + p.unit if p.unit else ''}"
+                         for p in exercise.parameters if p.name in values)
+    return [f"# exercise: {exercise.name} ({exercise.title})",
+            f"# experiment code: {code or 'none (this server keeps no experiments)'}",
+            f"# exported: {time.strftime('%Y-%m-%d %H:%M:%S %Z')}",
+            f"# settings: {settings}"]
+
+
+def filename(exercise: Exercise, code: str | None, what: str, extension: str,
+             now: float | None = None) -> str:
+    """``exercise_CODE_YYYYmmdd-HHMMSS_what.ext`` (no code part without a code)."""
+    stamp = time.strftime("%Y%m%d-%H%M%S", time.localtime(now))
+    what = re.sub(r"[^A-Za-z0-9]+", "-", what).strip("-").lower()
+    return "_".join(part for part in (exercise.name, code, stamp, what) if part) + f".{extension}"
+
+
+def scope_csv(exercise: Exercise, columns: tuple[str, ...], buffer: np.ndarray, values: dict,
+              code: str | None = None) -> bytes:
+    """The scope window: comment lines (exercise, code, time, settings), then a header
+    ``time_s [s],x_true_m [m],...`` and one row per sample of ``buffer`` (time, *columns)."""
+    header = ["time_s [s]"] + [f"{name} [{column_unit(name, exercise.charts)}]" for name in columns]
+    lines = _comments(exercise, code, values) + [",".join(header)]
+    lines += [",".join(_number(v) for v in row) for row in buffer]
+    return ("\n".join(lines) + "\n").encode()
+
+
+def readouts_csv(exercise: Exercise, rows: list[tuple[str, float, str]], values: dict,
+                 code: str | None = None) -> bytes:
+    """The readouts as ``quantity,value,unit`` rows (after the same comment lines)."""
+    lines = _comments(exercise, code, values) + ["quantity,value,unit"]
+    lines += [f"{_csv_field(label)},{_number(value)},{_csv_field(unit)}" for label, value, unit in rows]
+    return ("\n".join(lines) + "\n").encode()
+
+
+def chart_png(exercise: Exercise, chart: Chart, columns: tuple[str, ...], buffer: np.ndarray,
+              code: str | None = None) -> bytes:
+    """One scope chart over the scope window as a PNG, drawn like the scope."""
+    figure = Figure(figsize=FIGURE_IN, layout="constrained")
+    axes = figure.add_subplot()
+    index = {name: 1 + i for i, name in enumerate(columns)}
+    draw_chart(axes, chart, buffer, index)
+    axes.set_title(f"{exercise.title}: {chart.title}" + (f" ({code})" if code else ""), fontsize="medium")
+    axes.set(xlabel="time t [s]", ylabel=f"{chart.title} [{chart.unit}]" if len(chart.title) < 24
+             else f"[{chart.unit}]")
+    axes.legend(fontsize="x-small", loc="upper right")
+    out = io.BytesIO()
+    FigureCanvasAgg(figure)
+    figure.savefig(out, format="png", dpi=PNG_DPI)
+    return out.getvalue()
+
+
+def readout_rows(session) -> list[tuple[str, float, str]]:
+    """The readouts the tab shows: the analysis's, then the scope window's."""
+    analysis: Analysis | None = session.shown_analysis
+    rows = list(analysis.readouts) if analysis is not None else []
+    with session.lock:
+        trace = {name: session.buffer[:, column] for name, column in session.columns.items()}
+    if len(next(iter(trace.values()), ())) >= 10:
+        rows += [(f"{label} (scope window)", value, unit)
+                 for label, value, unit in session.exercise.live_readouts(trace)]
+    return rows
+
+
+def add_buttons(session) -> None:
+    """The export buttons (call inside the Scope tab while the GUI is built)."""
+    gui, exercise = session.client.gui, session.exercise
+    with gui.add_folder("Export for your report", expand_by_default=False):
+        gui.add_markdown("*Files named after the exercise, the experiment code and the time. "
+                         "The scope window holds every sample of the charts; pause first to keep "
+                         "the CSV and the pictures of the same moment.*")
+        choices = {"Scope window (CSV)": lambda: _send_scope(session),
+                   "Readouts (CSV)": lambda: _send_readouts(session)}
+        for chart in exercise.charts:
+            choices[f"Chart: {chart.title} (PNG)"] = lambda chart=chart: _send_chart(session, chart)
+        for label, action in choices.items():
+            button = gui.add_button(label, icon=viser.Icon.DOWNLOAD)
+            button.on_click(session._on(("export", label), action))
+
+
+def _snapshot(session) -> tuple[np.ndarray, dict, str | None]:
+    with session.lock:
+        return session.buffer.copy(), dict(session.values), session.autosave_code
+
+
+def _send_scope(session) -> None:
+    buffer, values, code = _snapshot(session)
+    exercise = session.exercise
+    content = scope_csv(exercise, tuple(session.columns), buffer, values, code)
+    session.client.send_file_download(filename(exercise, code, "scope", "csv"), content, save_immediately=True)
+
+
+def _send_readouts(session) -> None:
+    _, values, code = _snapshot(session)
+    exercise = session.exercise
+    content = readouts_csv(exercise, readout_rows(session), values, code)
+    session.client.send_file_download(filename(exercise, code, "readouts", "csv"), content,
+                                      save_immediately=True)
+
+
+def _send_chart(session, chart: Chart) -> None:
+    buffer, _, code = _snapshot(session)
+    exercise = session.exercise
+    content = chart_png(exercise, chart, tuple(session.columns), buffer, code)
+    session.client.send_file_download(filename(exercise, code, chart.title, "png"), content,
+                                      save_immediately=True)

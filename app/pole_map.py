@@ -1,0 +1,350 @@
+"""The Pole map tab: one colour legend for the whole lab, labelled poles, root loci.
+
+Every exercise reports its poles as named sets (``Analysis.poles``).  Each set
+belongs to one of four categories, drawn in the same colour in every exercise
+(issue 11, defect 15): the open-loop plant, the closed loop, a filter's error
+dynamics and a state-feedback regulator.  ``category`` maps a set's name onto
+them; a test checks every exercise's sets are mapped by a rule, not by default.
+
+Each mode (a real pole or a complex pair) gets a number: the table below the
+maps lists it with its kind, natural frequency f_n = |s|/2π and damping
+ζ = −Re s/|s|, and a top axis on each map puts the number above the mode.
+
+Exercises with a common gain factor (``Exercise.locus``) get the root locus:
+the closed-loop poles as the factor sweeps its range, as small dots in the
+closed-loop colour, the poles at the current factor drawn large on them.
+The closed loop's state matrix is affine in the factor (the factor scales the
+controller's output), so two matrices per setting give the whole sweep by
+eigenvalues alone (``locus_poles``, cached per setting; tested against the
+exercise's own closed-loop poles).
+"""
+
+from __future__ import annotations
+
+import re
+import threading
+from collections import OrderedDict
+from dataclasses import dataclass
+
+import numpy as np
+import viser
+
+from app import scope
+from lab_modules import analysis
+from lab_modules.exercises import Exercise
+
+LIGHT_DAMPING = 0.3               # poles below this damping always belong to the dominant view
+LOCUS_POINTS = 48                 # factor values per root locus (geometric over the parameter's range)
+LOCUS_CACHE = 64                  # settings whose root locus is kept
+LABEL_PX, CHAR_PX, LABEL_SPACE_PX = 470, 7, 6   # plot width, label character width, space between labels [px]
+MARGIN = 0.08                     # share of the pole span added on each side of a map
+#: Parameters that change nothing in the linear analysis (left out of the locus cache key)
+NOT_IN_LOCUS = {"seed", "time_scale", "shown_mode", "data"}
+
+
+@dataclass(frozen=True)
+class Category:
+    name: str
+    color: str
+    meaning: str
+
+
+#: The lab's pole categories, in the order of the legend and the table.
+CATEGORIES = (
+    Category("plant", "#7f7f7f", "plant / open loop (no feedback)"),
+    Category("closed loop", "#1f77b4", "closed loop (plant, filter and controller together)"),
+    Category("filter error", "#d62728", "filter error (A − A K C): how fast an estimate forgets its error"),
+    Category("regulator", "#2ca02c", "state-feedback regulator (A − B K)"),
+)
+BY_NAME = {c.name: c for c in CATEGORIES}
+LOCUS_COLOR = "#9ecae1"           # the closed-loop colour, light: the root locus
+#: (pattern on the set's name, category), first match wins
+RULES = (
+    (r"error", "filter error"),
+    (r"regulator", "regulator"),
+    (r"open-loop|open loop|plant|coil", "plant"),
+    (r"loop", "closed loop"),
+)
+#: Marker (size, hollow) of the 1st, 2nd, 3rd ... set of one category in a map
+MARKERS = ((9.0, False), (10.0, True), (6.0, False), (13.0, True))
+
+
+def category(set_name: str) -> Category:
+    """The category of a pole set, from its name (``RULES``); unknown names count as plant."""
+    return BY_NAME[matched_rule(set_name) or "plant"]
+
+
+def matched_rule(set_name: str) -> str | None:
+    return next((name for pattern, name in RULES if re.search(pattern, set_name, re.IGNORECASE)), None)
+
+
+def legend_markdown() -> str:
+    """The one colour legend of the lab (the same text in every exercise)."""
+    dots = " &nbsp; ".join(f'<span style="color:{c.color}">●</span> {c.meaning}' for c in CATEGORIES)
+    return (f"**Colours (every exercise):** {dots} &nbsp; <span style=\"color:{LOCUS_COLOR}\">•</span> "
+            "root locus: the closed loop's poles as the gain factor sweeps its range. A hollow marker is a "
+            "second set of the same kind. The numbers on the top axis are the modes of the table below.")
+
+
+# -- modes --------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Mode:
+    """One real pole or complex pair (the upper one) of a set."""
+
+    number: int
+    set_name: str
+    pole: complex
+
+    @property
+    def is_real(self) -> bool:
+        return abs(self.pole.imag) <= 1e-9 * max(abs(self.pole), 1.0)
+
+    @property
+    def natural_rad_s(self) -> float:
+        return float(abs(self.pole))
+
+    @property
+    def natural_hz(self) -> float:
+        return self.natural_rad_s / (2 * np.pi)
+
+    @property
+    def damping(self) -> float:
+        return float(-self.pole.real / abs(self.pole)) if abs(self.pole) > 0 else 1.0
+
+    @property
+    def kind(self) -> str:
+        if self.is_real:
+            if self.pole.real > 0:
+                return "unstable real pole (diverges)"
+            if self.pole.real == 0:
+                return "integrator (s = 0)"
+            return f"real, τ = {_duration(-1.0 / self.pole.real)}"
+        if self.pole.real > 0:
+            return "unstable oscillation"
+        return "lightly damped oscillation" if self.damping < 0.1 else "oscillation"
+
+
+def _duration(seconds: float) -> str:
+    return f"{seconds * 1e3:.3g} ms" if seconds < 1 else f"{seconds:.3g} s"
+
+
+def modes(poles: dict[str, np.ndarray]) -> list[Mode]:
+    """The modes of all sets, numbered by category (``CATEGORIES`` order), then set, then
+    from the most unstable (largest Re s) down."""
+    order = {c.name: k for k, c in enumerate(CATEGORIES)}
+    sets = sorted(poles, key=lambda name: order[category(name).name])
+    found = []
+    for name in sets:
+        ps = np.asarray(poles[name], dtype=complex)
+        upper = [p for p in ps if p.imag >= -1e-9 * max(abs(p), 1.0)]
+        found += [(name, complex(p.real, abs(p.imag) if abs(p.imag) > 1e-9 * max(abs(p), 1.0) else 0.0))
+                  for p in sorted(upper, key=lambda p: -p.real)]
+    return [Mode(k + 1, name, p) for k, (name, p) in enumerate(found)]
+
+
+def table_markdown(poles: dict[str, np.ndarray]) -> str:
+    """The pole table: every mode with its number, set, kind, f_n, ζ and s."""
+    rows = ["| # | set | kind | f_n [Hz] | ζ | s [rad/s] |", "|---:|---|---|---:|---:|---|"]
+    for m in modes(poles):
+        dot = f'<span style="color:{category(m.set_name).color}">●</span>'
+        s = f"{m.pole.real:.0f}" if m.is_real else f"{m.pole.real:.0f} ± {m.pole.imag:.0f}j"
+        rows.append(f"| {m.number} | {dot} {m.set_name} | {m.kind} | {m.natural_hz:.3g} | {m.damping:.2f} | {s} |")
+    return "\n".join(rows)
+
+
+# -- root locus -----------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Locus:
+    """Closed-loop poles [rad/s] (rows) at each factor value of ``factors``."""
+
+    parameter: str
+    label: str
+    set_name: str
+    factors: np.ndarray
+    poles: np.ndarray
+
+
+_locus_cache: OrderedDict = OrderedDict()
+_locus_lock = threading.Lock()
+
+
+def locus_poles(exercise: Exercise, values: dict, factors: np.ndarray) -> np.ndarray:
+    """The locus set's poles [rad/s] at each of ``factors`` (rows), by interpolating the closed
+    loop's state matrix between the two ends of ``factors`` (it is affine in the factor)."""
+    low, high = float(factors[0]), float(factors[-1])
+    (A_low, A_high), T = exercise.locus_matrices(values, (low, high))
+    A_low, A_high = np.asarray(A_low, dtype=float), np.asarray(A_high, dtype=float)
+    slope = (A_high - A_low) / (high - low)
+    rows = [np.linalg.eigvals(A_low + (f - low) * slope) for f in factors]
+    poles = np.array(rows)
+    return poles if T is None else analysis.z_to_s(poles, T)
+
+
+def locus(exercise: Exercise, values: dict) -> Locus | None:
+    """The exercise's root locus at these settings (None without ``Exercise.locus``); computed
+    once per setting of the other parameters (the factor itself only moves the marker)."""
+    if exercise.locus is None:
+        return None
+    parameter_name, set_name = exercise.locus
+    key = (exercise.name, tuple(sorted((k, v) for k, v in values.items()
+                                       if k not in NOT_IN_LOCUS and k != parameter_name)))
+    parameter = next(p for p in exercise.parameters if p.name == parameter_name)
+    with _locus_lock:
+        cached = _locus_cache.get(key)
+        if cached is not None:
+            _locus_cache.move_to_end(key)
+    if cached is None:
+        factors = np.geomspace(parameter.minimum, parameter.maximum, LOCUS_POINTS)
+        cached = (factors, locus_poles(exercise, values, factors))
+        with _locus_lock:                             # the analysis threads of all tabs share it
+            _locus_cache[key] = cached
+            while len(_locus_cache) > LOCUS_CACHE:
+                _locus_cache.popitem(last=False)
+    factors, poles = cached
+    unit = f" {parameter.unit}" if parameter.unit else ""
+    label = (f"root locus: {set_name}, {parameter.label} {parameter.minimum:g}…{parameter.maximum:g}{unit} "
+             f"(now {values[parameter_name]:g})")
+    return Locus(parameter_name, label, set_name, factors, poles)
+
+
+# -- the two maps ---------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class PoleView:
+    """What the Pole map tab shows: the pole sets and the root locus."""
+
+    poles: dict
+    locus: Locus | None = None
+
+    def same_as(self, other: PoleView | None) -> bool:
+        return (other is not None and self.poles.keys() == other.poles.keys()
+                and all(np.array_equal(self.poles[k], other.poles[k]) for k in self.poles)
+                and (self.locus is other.locus or (
+                    self.locus is not None and other.locus is not None and self.locus.label == other.locus.label
+                    and np.array_equal(self.locus.poles, other.locus.poles))))
+
+
+def view(exercise: Exercise, values: dict, poles: dict[str, np.ndarray]) -> PoleView:
+    """The pole view of an analysis; the root locus is left out if it cannot be computed here."""
+    try:
+        return PoleView(poles, locus(exercise, values))
+    except (ValueError, ArithmeticError, KeyError, NotImplementedError):   # incl. LinAlgError
+        return PoleView(poles)
+
+
+def dominant_decay_rad_s(poles: dict[str, np.ndarray]) -> float:
+    """Decay rate |Re s| up to which a pole counts as dominant: twice the median
+    decay rate, which leaves out the sensor-lag and amplifier poles (thousands
+    of rad/s) that squash the real axis, but keeps the rotor, controller and
+    filter poles around them."""
+    decay = np.abs(np.concatenate([np.asarray(p, dtype=complex) for p in poles.values()] or [np.zeros(0)]).real)
+    return 2.0 * float(np.median(decay)) if decay.size else np.inf
+
+
+def _dominant(p: np.ndarray, limit: float) -> np.ndarray:
+    p = np.asarray(p, dtype=complex)
+    damping = -p.real / np.maximum(np.abs(p), 1e-300)
+    return p[(np.abs(p.real) <= limit) | (damping < LIGHT_DAMPING)]
+
+
+def charts(pole_view: PoleView | dict) -> tuple[tuple[tuple, dict], tuple[tuple, dict]]:
+    """uPlot arguments of the two pole maps: the dominant poles (slow, or lightly
+    damped: |Re s| below ``dominant_decay_rad_s`` or damping below
+    ``LIGHT_DAMPING``) and all poles."""
+    if isinstance(pole_view, dict):
+        pole_view = PoleView(pole_view)
+    poles, path = pole_view.poles, pole_view.locus
+    limit = dominant_decay_rad_s(poles)
+    numbered = modes(poles)
+    chosen = {name: _dominant(p, limit) for name, p in poles.items()}
+    path_points = np.zeros(0, dtype=complex) if path is None else path.poles.ravel()
+    path_points = path_points[np.isfinite(path_points)]
+    title = f"Dominant poles (Re s > −{limit:.0f} rad/s or damping ζ < {LIGHT_DAMPING})"
+    shown_modes = [m for m in numbered if _dominant(np.array([m.pole]), limit).size]
+    return (pole_map(chosen, title, shown_modes, _dominant(path_points, limit), path),
+            pole_map(poles, "All poles", numbered, path_points, path))
+
+
+def span(points: np.ndarray) -> tuple[tuple[float, float], tuple[float, float]]:
+    """(x range, y range) [rad/s] of a map: every point and the imaginary axis inside, with
+    ``MARGIN`` of the span on each side; the y range symmetric (conjugate pairs)."""
+    points = np.asarray(points, dtype=complex)
+    real = np.append(points.real, 0.0)
+    low, high = float(real.min()), float(real.max())
+    width = high - low or max(abs(low), 1.0)
+    reach = float(np.abs(points.imag).max()) if points.size else 0.0
+    if reach == 0.0:                                  # all poles real: a square-ish view of the real axis
+        reach = 0.5 * width
+    return (low - MARGIN * width, high + MARGIN * width), (-(1 + MARGIN) * reach, (1 + MARGIN) * reach)
+
+
+def _label_text(group: list[Mode]) -> str:
+    numbers = sorted(m.number for m in group)
+    return ",".join(map(str, numbers)) if len(numbers) <= 2 else f"{numbers[0]},{numbers[1]},+{len(numbers) - 2}"
+
+
+def _labels(shown: list[Mode], x_range: tuple[float, float]) -> tuple[tuple[float, ...], tuple[str, ...]]:
+    """Top-axis positions and texts of the mode numbers; labels that would overlap (at
+    ``LABEL_PX`` of plot width) merge into one ("3,7" or "3,7,+2": two more)."""
+    px_per_unit = LABEL_PX / (x_range[1] - x_range[0])
+
+    def centre(group: list[Mode]) -> float:
+        return float(np.mean([m.pole.real for m in group]))
+
+    def overlap(a: list[Mode], b: list[Mode]) -> bool:
+        room = (len(_label_text(a)) + len(_label_text(b))) * CHAR_PX / 2 + LABEL_SPACE_PX
+        return (centre(b) - centre(a)) * px_per_unit < room
+
+    groups = [[m] for m in sorted(shown, key=lambda m: m.pole.real)]
+    merged = True
+    while merged:
+        merged = False
+        for k in range(len(groups) - 1):
+            if overlap(groups[k], groups[k + 1]):
+                groups[k:k + 2] = [groups[k] + groups[k + 1]]
+                merged = True
+                break
+    return tuple(centre(g) for g in groups), tuple(_label_text(g) for g in groups)
+
+
+def pole_map(poles: dict[str, np.ndarray], title: str, shown: list[Mode] | None = None,
+             path_points: np.ndarray | None = None, path: Locus | None = None) -> tuple[tuple, dict]:
+    """A pole map as a scatter plot over one shared, sorted real axis (each pole
+    set a series with gaps where the others have their poles), with the
+    imaginary axis drawn as a dashed line between two extra rows at Re s = 0,
+    the root locus (if any) as small dots under the poles, and explicit ranges
+    that hold every point (issue 11, defect 3)."""
+    path_points = np.zeros(0, dtype=complex) if path_points is None else np.asarray(path_points, dtype=complex)
+    x_range, y_range = span(np.concatenate([np.asarray(p, dtype=complex) for p in poles.values()] + [path_points]))
+    layers = []                                       # (series options, points), drawn in this order
+    if path is not None:
+        layers.append((viser.uplot.Series(
+            label=path.label, stroke=LOCUS_COLOR, width=0,
+            points=viser.uplot.Series_Points(show=True, size=4.0, width=0, fill=LOCUS_COLOR, stroke=LOCUS_COLOR)),
+            path_points))
+    counts: dict[str, int] = {}
+    for name, points in poles.items():
+        color = category(name).color
+        size, hollow = MARKERS[min(counts.get(color, 0), len(MARKERS) - 1)]
+        counts[color] = counts.get(color, 0) + 1
+        layers.append((viser.uplot.Series(
+            label=name, stroke=color, width=0,
+            points=viser.uplot.Series_Points(show=True, size=size, width=2.0,
+                                             fill="#ffffff" if hollow else color, stroke=color)),
+            np.asarray(points, dtype=complex)))
+    axis_ends = np.array([y_range[0], y_range[1]]) / (1 + MARGIN) * 1j
+    layers.append((viser.uplot.Series(label="Re s = 0", stroke="#000000", width=1, dash=(6.0, 4.0),
+                                      points=viser.uplot.Series_Points(show=False)), axis_ends))
+    rows = sorted((p.real, p.imag, k) for k, (_, points) in enumerate(layers) for p in points)
+    x = np.array([r[0] for r in rows])
+    columns = [np.full(len(x), np.nan) for _ in layers]
+    for row, (_, value, k) in enumerate(rows):
+        columns[k][row] = value
+    splits, texts = _labels(shown if shown is not None else modes(poles), x_range)
+    axes = (viser.uplot.Axis(label="Re s [rad/s]"), viser.uplot.Axis(label="Im s [rad/s]", size=scope.Y_AXIS_SIZE),
+            viser.uplot.Axis(side=0, scale="x", label="mode # (table below)", labelSize=16, size=20,
+                             splits=splits, values=texts, grid={"show": False}, ticks={"show": True, "size": 4}))
+    return (x, *columns), {
+        "series": (viser.uplot.Series(label="Re s [rad/s]"), *(options for options, _ in layers)),
+        "title": title, "legend": viser.uplot.Legend(live=False), "padding": scope.PADDING, "axes": axes,
+        "scales": {"x": viser.uplot.Scale(time=False, range=x_range),
+                   "y": viser.uplot.Scale(auto=False, min=y_range[0], max=y_range[1])}}
