@@ -27,7 +27,9 @@ def _steps(result: Analysis | Iterator[Analysis]) -> Iterator[Analysis]:
     return iter((result,)) if isinstance(result, Analysis) else result
 
 
-def _number(value: float) -> str:
+def _number(value: float | str) -> str:
+    if isinstance(value, str):                        # a word instead of a number ("touched down")
+        return value
     if isinstance(value, (int, np.integer)):
         return str(value)
     if not np.isfinite(value):

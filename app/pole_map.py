@@ -24,7 +24,7 @@ from __future__ import annotations
 import re
 import threading
 from collections import OrderedDict
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import viser
@@ -94,6 +94,7 @@ class Mode:
     number: int
     set_name: str
     pole: complex
+    name: str | None = None       # the exercise's physical name (``Exercise.mode_names``), if any
 
     @property
     def is_real(self) -> bool:
@@ -123,32 +124,45 @@ class Mode:
             return "unstable oscillation"
         return "lightly damped oscillation" if self.damping < 0.1 else "oscillation"
 
+    @property
+    def label(self) -> str:
+        """The mode's physical name where the exercise gives one (marked if unstable), else its kind."""
+        if not self.name:
+            return self.kind
+        return f"{self.name} (unstable)" if self.pole.real > 0 and "unstable" not in self.name else self.name
+
 
 def _duration(seconds: float) -> str:
     return f"{seconds * 1e3:.3g} ms" if seconds < 1 else f"{seconds:.3g} s"
 
 
-def modes(poles: dict[str, np.ndarray]) -> list[Mode]:
+def modes(poles: dict[str, np.ndarray], names: dict[str, list] | None = None) -> list[Mode]:
     """The modes of all sets, numbered by category (``CATEGORIES`` order), then set, then
-    from the most unstable (largest Re s) down."""
+    from the most unstable (largest Re s) down; ``names`` (``Exercise.mode_names``: per set,
+    one name or None per pole in the set's order) names them."""
+    names = names or {}
     order = {c.name: k for k, c in enumerate(CATEGORIES)}
     sets = sorted(poles, key=lambda name: order[category(name).name])
     found = []
-    for name in sets:
-        ps = np.asarray(poles[name], dtype=complex)
-        upper = [p for p in ps if p.imag >= -1e-9 * max(abs(p), 1.0)]
-        found += [(name, complex(p.real, abs(p.imag) if abs(p.imag) > 1e-9 * max(abs(p), 1.0) else 0.0))
-                  for p in sorted(upper, key=lambda p: -p.real)]
-    return [Mode(k + 1, name, p) for k, (name, p) in enumerate(found)]
+    for set_name in sets:
+        ps = np.asarray(poles[set_name], dtype=complex)
+        given = list(names.get(set_name) or [])
+        given += [None] * (ps.size - len(given))
+        upper = [(p, given[k]) for k, p in enumerate(ps) if p.imag >= -1e-9 * max(abs(p), 1.0)]
+        found += [(set_name, complex(p.real, abs(p.imag) if abs(p.imag) > 1e-9 * max(abs(p), 1.0) else 0.0), name)
+                  for p, name in sorted(upper, key=lambda pair: -pair[0].real)]
+    return [Mode(k + 1, set_name, p, name) for k, (set_name, p, name) in enumerate(found)]
 
 
-def table_markdown(poles: dict[str, np.ndarray]) -> str:
-    """The pole table: every mode with its number, set, kind, f_n, ζ and s."""
-    rows = ["| # | set | kind | f_n [Hz] | ζ | s [rad/s] |", "|---:|---|---|---:|---:|---|"]
-    for m in modes(poles):
+def table_markdown(pole_view: PoleView | dict) -> str:
+    """The pole table: every mode with its number, set, name (or kind), f_n, ζ and s."""
+    if isinstance(pole_view, dict):
+        pole_view = PoleView(pole_view)
+    rows = ["| # | set | mode | f_n [Hz] | ζ | s [rad/s] |", "|---:|---|---|---:|---:|---|"]
+    for m in modes(pole_view.poles, pole_view.names):
         dot = f'<span style="color:{category(m.set_name).color}">●</span>'
         s = f"{m.pole.real:.0f}" if m.is_real else f"{m.pole.real:.0f} ± {m.pole.imag:.0f}j"
-        rows.append(f"| {m.number} | {dot} {m.set_name} | {m.kind} | {m.natural_hz:.3g} | {m.damping:.2f} | {s} |")
+        rows.append(f"| {m.number} | {dot} {m.set_name} | {m.label} | {m.natural_hz:.3g} | {m.damping:.2f} | {s} |")
     return "\n".join(rows)
 
 
@@ -214,9 +228,10 @@ class PoleView:
 
     poles: dict
     locus: Locus | None = None
+    names: dict = field(default_factory=dict)     # ``Exercise.mode_names`` of these poles
 
     def same_as(self, other: PoleView | None) -> bool:
-        return (other is not None and self.poles.keys() == other.poles.keys()
+        return (other is not None and self.poles.keys() == other.poles.keys() and self.names == other.names
                 and all(np.array_equal(self.poles[k], other.poles[k]) for k in self.poles)
                 and (self.locus is other.locus or (
                     self.locus is not None and other.locus is not None and self.locus.label == other.locus.label
@@ -224,11 +239,16 @@ class PoleView:
 
 
 def view(exercise: Exercise, values: dict, poles: dict[str, np.ndarray]) -> PoleView:
-    """The pole view of an analysis; the root locus is left out if it cannot be computed here."""
+    """The pole view of an analysis with the exercise's mode names; the root locus (or the
+    names) are left out if they cannot be computed here."""
     try:
-        return PoleView(poles, locus(exercise, values))
-    except (ValueError, ArithmeticError, KeyError, NotImplementedError):   # incl. LinAlgError
-        return PoleView(poles)
+        names = exercise.mode_names(values, poles)
+    except (ValueError, ArithmeticError, KeyError, IndexError):             # incl. LinAlgError
+        names = {}
+    try:
+        return PoleView(poles, locus(exercise, values), names)
+    except (ValueError, ArithmeticError, KeyError, NotImplementedError):
+        return PoleView(poles, names=names)
 
 
 def dominant_decay_rad_s(poles: dict[str, np.ndarray]) -> float:
@@ -254,7 +274,7 @@ def charts(pole_view: PoleView | dict) -> tuple[tuple[tuple, dict], tuple[tuple,
         pole_view = PoleView(pole_view)
     poles, path = pole_view.poles, pole_view.locus
     limit = dominant_decay_rad_s(poles)
-    numbered = modes(poles)
+    numbered = modes(poles, pole_view.names)
     chosen = {name: _dominant(p, limit) for name, p in poles.items()}
     path_points = np.zeros(0, dtype=complex) if path is None else path.poles.ravel()
     path_points = path_points[np.isfinite(path_points)]

@@ -105,8 +105,12 @@ class StickyRange:
 
 #: An invisible series over the sticky range: uPlot's auto range then covers exactly it.  (Changing
 #: the scale options instead makes viser rebuild the chart, which now and then came up without axes.)
+#: Its legend entry is hidden by ``LEGEND_STYLE`` (uPlot puts a series' ``class`` on its legend row).
+ANCHOR_CLASS = "lab-range-anchor"
 ANCHOR_SERIES = viser.uplot.Series(label="range", stroke="rgba(0,0,0,0)", width=0,
-                                   points=viser.uplot.Series_Points(show=False))
+                                   points=viser.uplot.Series_Points(show=False), **{"class": ANCHOR_CLASS})
+#: A style element for the page (``gui.add_html``): the anchor series stays out of the legends.
+LEGEND_STYLE = f"<style>.u-legend .{ANCHOR_CLASS} {{ display: none; }}</style>"
 
 
 def anchor(y_range: tuple[float, float] | None, n: int) -> np.ndarray:
@@ -122,6 +126,16 @@ def chart_options(x_label: str, y_label: str) -> dict:
                      viser.uplot.Axis(label=y_label, size=Y_AXIS_SIZE)),
             "legend": viser.uplot.Legend(live=False),
             "padding": PADDING}
+
+
+def append(buffer: np.ndarray, trace: np.ndarray, rows: int) -> np.ndarray:
+    """The scope buffer after a frame's new samples ``trace``, at most ``rows`` long.  A trace that
+    starts at or before the buffer's newest time is a new run (a Reset, or a slider move the
+    exercise answers with a fresh simulation): the old window is dropped, not joined to it
+    (issue 11, defect 6: a diagonal line back to t = 0 and a gap in the ±3σ band)."""
+    if len(trace) and len(buffer) and trace[0, 0] <= buffer[-1, 0]:
+        buffer = buffer[:0]
+    return np.concatenate([buffer, trace])[-rows:]
 
 
 def spanning(rows: np.ndarray, window_ms: float) -> tuple[np.ndarray, np.ndarray]:

@@ -115,12 +115,25 @@ def _cell(text: str) -> str:
     return str(text).replace("|", "\\|")
 
 
-def _format(value: float) -> str:
+SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
+
+
+def _format(value: float | str) -> str:
+    """A readout's value as a student reads it: 3 significant digits, thousands grouped up to 10⁹
+    ("480 000"), powers of ten written out beyond ("7.5·10⁻⁸"), a word as it is ("touched down")."""
+    if isinstance(value, str):                        # a word instead of a number
+        return value
     if np.isnan(value):
-        return "…"
+        return "—"
     if np.isinf(value):
         return "∞ (unstable)"
-    return f"{value:.3g}" if abs(value) < 1e4 else f"{value:.3e}"
+    if 1e3 <= abs(value) < 1e9:
+        return f"{float(f'{value:.4g}'):,.0f}".replace(",", " ")   # narrow no-break space
+    text = f"{value:.3g}"
+    if "e" in text:
+        mantissa, exponent = text.split("e")
+        return f"{mantissa}·10{str(int(exponent)).translate(SUPERSCRIPT)}"
+    return text
 
 
 def _analyses(result: Analysis | Iterator[Analysis]) -> Iterator[Analysis]:
@@ -279,6 +292,7 @@ class LabSession:
         self.shown_analysis: Analysis | None = None   # the last analysis shown, redrawn with fresh scope readouts
         self.scene = exercise.scene(self.values)
         self._build_gui()
+        self._follow_ranges()
         self._check_open()
         if self.scene is not None:
             self.scene.attach(self.client.scene)
@@ -419,6 +433,7 @@ class LabSession:
         if self.exercise.download_label:
             download = gui.add_button(self.exercise.download_label, icon=viser.Icon.DOWNLOAD)
             download.on_click(self._on("download", self._on_download))
+            self.download_note = gui.add_markdown("")     # what the button did, where the student looks
         self.inputs: dict[str, viser.GuiInputHandle] = {}
         self.refused: dict[str, bool] = {}            # boxes being put back to the value in use (_refuse)
         groups: dict[str, list[Parameter]] = {}
@@ -429,6 +444,7 @@ class LabSession:
                 for parameter in parameters:
                     self.inputs[parameter.name] = self._add_input(parameter)
         gui.add_markdown(NUMBER_BOX_HINT)
+        gui.add_html(scope.LEGEND_STYLE)
         self.error = gui.add_markdown("")
         if self.store is not None:
             with gui.add_folder("Saved experiment", expand_by_default=False):
@@ -473,7 +489,7 @@ class LabSession:
             gui.add_markdown("Poles in the s-plane (discrete poles mapped by s = ln z / T); the dashed line is "
                              "the imaginary axis, right of it is unstable. The first map leaves out the fast, "
                              "well-damped poles (sensor lag, amplifier) that squash the second.")
-            self.pole_table = gui.add_markdown(pole_map.table_markdown(first.poles))
+            self.pole_table = gui.add_markdown(pole_map.table_markdown(self.shown_poles))
         with self.tabs["Analysis"]:
             self.plots, self.plot_shapes = [], []
             for plot in first.plots:
@@ -529,6 +545,22 @@ class LabSession:
                                     initial_value=float(value), hint=_with_range(parameter))
         handle.on_update(self._on(("input", parameter.name), lambda p=parameter, h=handle: self._on_input(p, h.value)))
         return handle
+
+    def _follow_ranges(self) -> None:
+        """Sliders whose range depends on other values (e.g. the loaded recording's length) span that
+        range, the value clamped into it (issue 11, defect 11)."""
+        with self.lock:
+            values = dict(self.values)
+        for name, (low, high) in self.exercise.parameter_ranges(values).items():
+            handle = self.inputs.get(name)
+            if handle is None or not high > low:
+                continue
+            handle.min, handle.max = low, high
+            clamped = min(max(float(values[name]), low), high)
+            if clamped != values[name]:
+                handle.value = clamped
+                with self.lock:
+                    self.values[name] = clamped
 
     def _add_chart(self, chart: Chart):
         series = [viser.uplot.Series(label="time before now [ms]")]
@@ -599,16 +631,22 @@ class LabSession:
             self.values["data"] = data
             self._reset()
         self.recording = (uploaded.name, uploaded.content)
+        self._follow_ranges()
         self._changed()
         self._request_analysis()
 
     def _on_download(self) -> None:
+        """Make the file; the note under the button says what happened (issue 11, defect 5: the
+        reason a recording failed used to appear below the fold of the left panel)."""
+        self.download_note.content = "*Preparing the file …*"
+        self.client.flush()
         try:
             filename, content = self.exercise.download(dict(self.values))
         except ParameterError as error:
-            self.error.content = f"⚠️ {error}"
+            self.download_note.content = f"⚠️ {escaped(error)}"
             return
         self.client.send_file_download(filename, content, save_immediately=True)
+        self.download_note.content = f"Sent {escaped(filename)} ({len(content) / 1e3:.0f} kB)."
 
     def _on_button(self, which: str) -> None:
         with self.lock:
@@ -712,7 +750,7 @@ class LabSession:
                     for handle, (data, options) in zip(self.pole_plots, pole_map.charts(poles)):
                         handle.series, handle.axes, handle.data = options["series"], options["axes"], data
                         handle.scales, handle.title = options["scales"], options["title"]
-                    self.pole_table.content = pole_map.table_markdown(result.poles)
+                    self.pole_table.content = pole_map.table_markdown(poles)
         return True
 
     def _readouts_markdown(self, result: Analysis) -> str:
@@ -788,7 +826,7 @@ class LabSession:
             trace = self.simulation.advance(steps)
             self.speed_meter.add(steps * self.simulation.sample_time_s, time.thread_time() - started, elapsed)
             window = self._window_rows()
-            self.buffer = np.concatenate([self.buffer, trace])[-window:]
+            self.buffer = scope.append(self.buffer, trace, window)
             message = self.simulation.status_message()
             if message:
                 self.running = False

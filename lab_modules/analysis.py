@@ -286,6 +286,28 @@ def largest_gain_factor(rms_at_gain, bound: float, low: float = 0.05,
     return low
 
 
+def independent_samples(x: np.ndarray) -> float:
+    """How many independent samples the mean of x² over a stationary, zero-mean Gaussian
+    sequence ``x`` is worth: N / (1 + 2 Σ ρ_k²), ρ_k the sample autocorrelation of x up to its
+    first zero crossing (for Gaussian x, x² has autocorrelation ρ_k²).  A filter's estimate
+    error is correlated over its error time constant, so far fewer than N."""
+    x = np.asarray(x, dtype=float)
+    x = x[np.isfinite(x)]
+    n = x.size
+    if n < 2:
+        return float(n)
+    x = x - x.mean()
+    size = 1 << int(np.ceil(np.log2(2 * n)))
+    spectrum = np.fft.rfft(x, size)
+    acf = np.fft.irfft(spectrum * np.conj(spectrum), size)[:n]
+    if acf[0] <= 0:
+        return float(n)
+    rho = acf / acf[0]
+    negative = np.flatnonzero(rho[1:] <= 0)
+    last = int(negative[0]) + 1 if negative.size else n
+    return float(n / (1.0 + 2.0 * np.sum(rho[1:last] ** 2)))
+
+
 def z_to_s(poles_z: np.ndarray, sample_time_s: float) -> np.ndarray:
     """Map discrete poles to the equivalent continuous ones, s = ln(z) / T [rad/s]."""
     return np.log(np.asarray(poles_z, dtype=complex)) / sample_time_s

@@ -41,7 +41,7 @@ def test_pole_map_legend_ranges_and_locus(open_tab, tmp_path):
         assert page.get_by_text(category.meaning, exact=False).count(), category
     table = page.locator("table:visible").filter(has_text="f_n [Hz]").first
     table.wait_for(timeout=10000)
-    assert "unstable real pole" in table.inner_text()
+    assert "rotor position (unstable magnet pole)" in table.inner_text()   # the physical name (mode_names)
     maps = _maps(page)
     assert all(any(label.startswith("root locus") for label in m["labels"]) for m in maps), maps
     page.screenshot(path=str(tmp_path / "kalman_noise.png"))

@@ -22,9 +22,9 @@ from app.session import LabSession
 from lab_modules.exercises import get, registry
 
 #: the exercises with a Kalman filter in their browser simulation (maglev_tuning replays a
-#: precomputed run: not inspected yet)
+#: precomputed observer run that keeps each sample's prior)
 FILTERED = ("kalman_noise", "ekf_parameters", "ekf_disturbance", "lqg_vs_pid", "maglev_tracking", "thrust_liftoff",
-            "adaptive_filter")
+            "adaptive_filter", "maglev_tuning")
 
 
 class _Client:
@@ -207,3 +207,25 @@ def test_markdown_reads_like_a_table():
     text = inspector.markdown(simulation.filter_state(), simulation.sample_time_s)
     assert "(sample 100)" in text and "| collar position x |" in text and "ν/√S" in text
     assert sum(line.startswith("|---") for line in text.splitlines()) == 4   # x̂, ρ, K, innovation tables
+
+
+def test_maglev_tuning_replay_inspects_the_observer_it_replays():
+    """The replayed run keeps each sample's prior: the correction redone from it gives the
+    estimate, σ, innovation and √S columns the scope replays, at any sample."""
+    exercise = get("maglev_tuning")
+    simulation = exercise.simulation(exercise.resolve({}))
+    columns = ("time_s",) + tuple(simulation.columns)
+    for ahead in (0, 1234, 37):
+        simulation.advance(ahead)
+        row = simulation.advance(1)[0]
+        state = simulation.filter_state()
+        P = state["P"]
+        np.testing.assert_allclose(P, P.T, rtol=0, atol=1e-15 * np.abs(P).max())
+        assert np.linalg.eigvalsh(P).min() >= -1e-9 * np.abs(P).max()
+        for k, name in enumerate(("x_estimated_m", "velocity_estimated_m_per_s", "current_estimated_a")):
+            assert state["x"][k] == pytest.approx(row[columns.index(name)], rel=1e-9, abs=1e-15)
+        for k, name in ((1, "velocity_sigma_m_per_s"), (2, "current_sigma_a")):
+            assert np.sqrt(P[k, k]) == pytest.approx(row[columns.index(name)], rel=1e-6)
+        assert state["innovation"][0] == pytest.approx(row[columns.index("innovation_m")], rel=1e-9, abs=1e-15)
+        assert state["innovation_sigma"][0] == pytest.approx(row[columns.index("innovation_sigma_m")], rel=1e-9)
+        assert state["K"].shape == (3, 1) and state["time_s"] == row[0]

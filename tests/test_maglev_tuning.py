@@ -111,8 +111,11 @@ def test_too_small_q_is_overconfident():
 
 
 def test_empty_still_segment_is_a_parameter_error():
-    with pytest.raises(ParameterError, match="still segment 100 ... 200 s holds 0 samples"):
+    with pytest.raises(ParameterError, match="still segment 100 ... 200 s: start and end must lie inside the "
+                                             "recording's 0 ... 6 s"):
         tuning_metrics(still_start_s=100.0, still_end_s=200.0)
+    with pytest.raises(ParameterError, match="still segment 1 ... 1.001 s holds 1 samples"):
+        tuning_metrics(still_start_s=1.0, still_end_s=1.001)
 
 
 def test_replay_plays_the_observer_output_then_stops():

@@ -12,12 +12,14 @@ import scipy.linalg
 
 from app import pole_map
 from lab_modules import analysis
-from lab_modules.exercises import Analysis, get, registry
-from lab_modules.exercises.ekf_parameters import linear_axis
+from lab_modules.exercises import Analysis, get, registry, sensor_placement
+from lab_modules.exercises.ekf_parameters import linear_axis, linear_poles
+from lab_modules.plants.radial_bearing import RIG
 
 EXERCISES = tuple(registry())
 #: the exercises with a common gain factor and the pole set it moves
 LOCI = {"kalman_noise": ("gain_factor", "closed loop"), "sensor_placement": ("gain_factor", "closed loop"),
+        "ekf_disturbance": ("pid_gain", "closed loop (linearised)"),
         "ekf_parameters": ("pid_gain", "closed loop (linear, rated k_i, k_x)"),
         "lqg_vs_pid": ("pid_gain", "PID loop with filter")}
 
@@ -119,6 +121,17 @@ def test_ekf_parameters_shows_closed_loop_and_filter_error(defaults):
     assert np.max(np.abs(np.sort_complex(got) - np.sort_complex(expected))) < 1e-6 * np.max(np.abs(expected))
 
 
+def test_ekf_disturbance_shows_closed_loop_and_filter_error(defaults):
+    """The linearised closed loop (stable at the defaults, the same as ekf_parameters' linear loop
+    on the same sliders) beside the EKF's filter error poles."""
+    _, values, poles = defaults["ekf_disturbance"]
+    assert {pole_map.category(name).name for name in poles} == {"plant", "closed loop", "filter error"}
+    closed = poles[LOCI["ekf_disturbance"][1]]
+    assert np.all(closed.real < 0)
+    expected = linear_poles(linear_axis(values))["closed loop (linear, rated k_i, k_x)"]
+    assert np.max(np.abs(np.sort_complex(closed) - np.sort_complex(expected))) < 1e-9 * np.max(np.abs(expected))
+
+
 def test_modes_number_every_real_pole_and_pair_with_frequency_and_damping():
     poles = {"closed loop": np.array([-3 + 4j, -3 - 4j, -10.0]), "open-loop plant": np.array([5.0, -5.0])}
     modes = pole_map.modes(poles)
@@ -182,3 +195,71 @@ def test_locus_is_cached_per_setting_and_ignores_the_factor_itself():
     first = pole_map.locus(exercise, values)
     assert pole_map.locus(exercise, {**values, "gain_factor": 2.0}).poles is first.poles
     assert pole_map.locus(exercise, {**values, "sensor_lag_us": 100.0}).poles is not first.poles
+
+
+@pytest.mark.parametrize("name", EXERCISES)
+def test_mode_names_are_aligned_with_the_pole_sets(defaults, name):
+    """``Exercise.mode_names``: one name (or None) per pole of a reported set, a conjugate pair
+    named alike; every pole of a named plant set has its name (the generic kind stays for the rest)."""
+    exercise, values, poles = defaults[name]
+    names = pole_map.view(exercise, values, poles).names
+    for set_name, given in names.items():
+        ps = np.asarray(poles[set_name], dtype=complex)
+        assert len(given) == ps.size, (name, set_name)
+        for p, label in zip(ps, given):
+            twin = np.argmin(np.abs(ps - np.conj(p)))
+            assert given[twin] == label, (name, set_name, p)
+        if pole_map.category(set_name).name == "plant":
+            assert all(given), (name, set_name, given)
+
+
+def test_sensor_placement_names_the_mode_that_goes_unstable_first():
+    """Just above the largest stable gain with the external sensor (the claim's setting), the pole
+    table's most unstable closed-loop mode is the bending mode the claim names (mode 3, the 2nd
+    bending mode), and it is marked unstable."""
+    exercise = get("sensor_placement")
+    claim = next(c for c in exercise.claims if c.metric == "first_unstable_mode_external")
+    values = exercise.resolve({"sensor_offset_mm": sensor_placement.EXTERNAL_OFFSET_MM})
+    gain, first = sensor_placement.largest_stable_gain(values)
+    assert claim.accept[0] <= first <= claim.accept[1]
+    values = exercise.resolve({**values, "gain_factor": gain + 0.02})
+    pole_view = pole_map.view(exercise, values, first_analysis(exercise, values).poles)
+    closed = [m for m in pole_map.modes(pole_view.poles, pole_view.names) if m.set_name == "closed loop"]
+    growing = max(closed, key=lambda m: m.pole.real)
+    assert growing.pole.real > 0 and growing.name == sensor_placement.mode_name(first - 1)
+    assert growing.name == "rotor mode 3 (2nd bending)" and "bending" in claim.quantity + claim.paper
+    assert f"| {growing.number} |" in pole_map.table_markdown(pole_view)
+    assert "rotor mode 3 (2nd bending) (unstable)" in pole_map.table_markdown(pole_view)
+
+
+def test_sensor_placement_mode_names_match_the_beam_model(defaults):
+    """The open-loop plant's modes carry the name of the beam model's mode of that frequency: each
+    bending mode's f_n = |s|/2π lies within 2 % of its free natural frequency (the magnet's negative
+    stiffness k_x shifts it a little), the rigid mode (0 Hz free, on the ball bearing) is the real
+    pair (nearly ±) the magnet makes unstable."""
+    exercise, values, poles = defaults["sensor_placement"]
+    names = pole_map.view(exercise, values, poles).names
+    free = sensor_placement.rotor(values["modal_damping_percent"] / 100).natural_frequencies_hz(int(values["modes"]))
+    plant = np.asarray(poles["open-loop plant"], dtype=complex)
+    for j, f in enumerate(free):
+        mine = plant[[label == sensor_placement.mode_name(j) for label in names["open-loop plant"]]]
+        assert mine.size == 2, j
+        if j == 0:
+            assert np.all(mine.imag == 0) and mine.real.max() > 0 and mine.real.sum() == pytest.approx(0, abs=1e-4 * np.abs(mine).max())
+        else:
+            assert np.abs(mine) / (2 * np.pi) == pytest.approx([f, f], rel=0.02)
+            others = np.delete(free, j)
+            assert np.min(np.abs(others - abs(mine[0]) / (2 * np.pi))) > 0.2 * f   # no other mode that close
+    closed_named = [label for label in names["closed loop"] if label]
+    assert {sensor_placement.mode_name(j) for j in range(free.size)} == set(closed_named)
+
+
+def test_radial_axis_plant_poles_are_named_by_their_physics(defaults):
+    _, _, poles = defaults["kalman_noise"]
+    names = pole_map.view(get("kalman_noise"), defaults["kalman_noise"][1], poles).names["open-loop plant"]
+    by_name = dict(zip(names, np.asarray(poles["open-loop plant"], dtype=complex)))
+    assert by_name["rotor position (unstable magnet pole)"].real > 0
+    assert by_name["coil current (amplifier lag T_a)"] == pytest.approx(-1 / RIG.amplifier_lag_s)
+    table = pole_map.table_markdown(pole_map.view(get("kalman_noise"), defaults["kalman_noise"][1], poles))
+    assert "rotor position (unstable magnet pole) |" in table and "position sensor lag T_mx" in table
+    assert "real, τ =" in table                                 # the loops' poles keep their generic kind

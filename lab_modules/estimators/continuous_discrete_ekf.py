@@ -195,16 +195,23 @@ OBSERVER_COLUMNS = ("x_estimated_m", "velocity_estimated_m_per_s", "current_esti
 
 
 @numba.njit(**_JIT)
-def run_observer(time_s, measured_m, voltage_v, x, P, Q, r, p, n_substeps, out):
+def run_observer(time_s, measured_m, voltage_v, x, P, Q, r, p, n_substeps, out, priors):
     """The continuous-discrete EKF as a pure observer of a recording (§3.5, Fig. 3.23).
 
-    At each sample k: update with y_k (eq. 2.40-2.42), write a row of
-    ``OBSERVER_COLUMNS``, propagate to t_{k+1} with the recorded voltage u_k
-    held (eq. 2.43-2.45).  Returns the number of rows written (fewer than the
-    samples if the estimate stops being finite)."""
+    At each sample k: keep the prior (x⁻ in ``priors[k, :3]``, P⁻ row by row in
+    ``priors[k, 3:]``; the filter inspector redoes the correction from it),
+    update with y_k (eq. 2.40-2.42), write a row of ``OBSERVER_COLUMNS``,
+    propagate to t_{k+1} with the recorded voltage u_k held (eq. 2.43-2.45).
+    Returns the number of rows written (fewer than the samples if the estimate
+    stops being finite)."""
     gain = np.empty(3)
     n = time_s.shape[0]
     for k in range(n):
+        prior = priors[k]
+        for i in range(3):
+            prior[i] = x[i]
+            for j in range(3):
+                prior[3 + 3 * i + j] = P[i, j]
         innovation, s = update(x, P, measured_m[k], r, gain)
         row = out[k]
         row[0], row[1], row[2] = x[0], x[1], x[2]

@@ -158,11 +158,23 @@ class Exercise:
     def metrics(self, values: dict, duration_s: float) -> dict:
         raise NotImplementedError
 
+    def parameter_ranges(self, values: dict) -> dict[str, tuple[float, float]]:
+        """Narrower (minimum, maximum) of parameters whose valid range depends on the other values,
+        e.g. on the loaded recording's length; the tab's sliders follow them."""
+        return {}
+
     def locus_matrices(self, values: dict, factors: tuple[float, ...]) -> tuple[list[np.ndarray], float | None]:
         """For ``locus``: the state matrices of that closed loop with the parameter at each of
         ``factors`` (the others as in ``values``) and their sample time [s] (None: continuous).
         They must be affine in the factor (it scales the controller's output)."""
         raise NotImplementedError
+
+    def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
+        """Physical names of the poles of ``Analysis.poles`` (``poles``, as ``analyse`` returned
+        them), by set: one name or None per pole in the set's order, a conjugate pair both
+        named alike; the pole map's table shows them instead of the generic kind.  Default:
+        no names."""
+        return {}
 
     def open_loops(self, values: dict) -> dict:
         """Feedback loops broken at the plant input, by name -> open loop L (``control`` LTI

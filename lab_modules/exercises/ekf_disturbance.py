@@ -48,8 +48,9 @@ from lab_modules import analysis
 from lab_modules.claims import Claim
 from lab_modules.estimators import extended_kalman as ef
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
-from lab_modules.exercises._common import ekf_loop_fields
+from lab_modules.exercises._common import axis_plant_names, ekf_loop_fields
 from lab_modules.exercises.ekf_parameters import PARAMETERS as EKF_PARAMETERS_EXERCISE_PARAMETERS
+from lab_modules.exercises.ekf_parameters import linear_axis
 from lab_modules.exercises.kalman_noise import PARAMETERS as NOISE_EXERCISE_PARAMETERS
 from lab_modules.loops.radial_axis_ekf_loop import (
     EKFLoopSetup,
@@ -72,6 +73,8 @@ STEP_TIME_S = 0.05                  # the metrics' one-shot force step
 LOAD_RAMP_S, SWEEP_START_S = 0.05, 0.1
 PLOT_POINTS = 800
 FIG_4_WINDOW_S = (0.005, 0.06)        # shown before and after the step
+#: the pole set of the linearised closed loop (and of its root locus)
+CLOSED_LOOP = "closed loop (linearised)"
 
 _shared = {p.name: p for p in NOISE_EXERCISE_PARAMETERS}
 _ekf = {p.name: p for p in EKF_PARAMETERS_EXERCISE_PARAMETERS}      # same filter noise sliders
@@ -259,6 +262,7 @@ class EkfDisturbance(Exercise):
     parameters = PARAMETERS
     default_duration_s = 0.25
     claims = CLAIMS
+    locus = ("pid_gain", CLOSED_LOOP)
     charts = (
         Chart("Disturbance force f_z", "N", (
             Series("estimate", "force_estimated_n", 1.0, "#d62728"),
@@ -306,9 +310,23 @@ class EkfDisturbance(Exercise):
         notes = [f"Force step: {step['status']}", f"Gap sweep: {sweep['status']}",
                  ("Eq. 18 returns exactly the derivatives of eq. 10 at the filter's estimate (x_hat, i_hat); "
                   "its error against the truth is the estimate's error, mostly that of i_hat.")]
-        poles = {"open-loop plant": np.linalg.eigvals(np.asarray(RIG.continuous_model(DEFAULT_SENSOR_LAG_S).A)),
+        plant = RIG.continuous_model(values["sensor_lag_us"] * 1e-6)
+        poles = {"open-loop plant": np.linalg.eigvals(np.asarray(plant.A)),
+                 CLOSED_LOOP: analysis.z_to_s(analysis.loop_poles(linear_axis(values).loop()), T),
                  "filter error (at x = 0)": filter_poles(values)}
+        notes.append("Closed-loop poles (linearised at x = 0): the PID on the rig's linear model (eq. 3-4) with "
+                     "the plant's sensor lag, fed by a steady-state Kalman filter of x, v, i with the same q_22, "
+                     "q_33 and R; the force state f_z and its feedforward are left out.")
         return Analysis(readouts, poles, notes, [fig_4_plot(values, step), *fig_5_plots(values, sweep)])
+
+    def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
+        """The open-loop plant's poles by name (the loops' poles keep their generic kind)."""
+        return {"open-loop plant": axis_plant_names(poles["open-loop plant"])}
+
+    def locus_matrices(self, values: dict, factors: tuple[float, ...]) -> tuple[list[np.ndarray], float]:
+        """The linearised loop's state matrices (the states in the feedback) at these PID gains K."""
+        axis = linear_axis(values)
+        return [axis.loop_matrix(factor / values["pid_gain"]) for factor in factors], T
 
     def simulation(self, values: dict) -> EKFLoopSimulation:
         return EKFLoopSimulation(setup(values), seed=int(values["seed"]))

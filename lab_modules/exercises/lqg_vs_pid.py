@@ -53,7 +53,7 @@ from lab_modules.controllers.lqr import (
 )
 from lab_modules.controllers.pid import pid, setpoint_filter
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series, kalman_noise
-from lab_modules.exercises._common import pid_from_values
+from lab_modules.exercises._common import axis_plant_names, pid_from_values
 from lab_modules.loops.radial_axis_experiment import AxisSetup, AxisSimulation
 from lab_modules.loops.radial_axis_loop import OK, TRACE_COLUMNS
 from lab_modules.parameters import Parameter
@@ -234,6 +234,11 @@ def reference_step_figures(trace: np.ndarray, step_m: float) -> dict[str, float]
             "settling_time_s": settling,
             "peak_current_a": float(np.max(np.abs(current))),
             "rms_current_a": float(np.sqrt(np.mean(current**2)))}
+
+
+def _scaled(value, factor: float):
+    """A readout value in display units, or the word that stands for it."""
+    return value if isinstance(value, str) else value * factor
 
 
 def disturbance_step_figures(trace: np.ndarray, force_n: float) -> dict[str, float]:
@@ -699,6 +704,10 @@ class LqgVsPid(Exercise):
                 "A_aug": A_aug.tolist(), "B_aug": B_aug.tolist(),
                 "state_gain_K": list(lqg.state_gain), "integral_gain_K_I_v_per_m_s": lqg.integral_gain_v_per_m_s}
 
+    def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
+        """The open-loop plant's poles by name (the loops' poles keep their generic kind)."""
+        return {"open-loop plant": axis_plant_names(poles["open-loop plant"])}
+
     def locus_matrices(self, values: dict, factors: tuple[float, ...]) -> tuple[list[np.ndarray], float]:
         """The PID loop's state matrices (the states in the feedback) at these PID gains K."""
         axis = setups(values)["PID"]
@@ -717,19 +726,23 @@ class LqgVsPid(Exercise):
         linear = {name: loop_figures(axis) for name, axis in loops.items()}
         readouts = []
         for name in LOOPS:
-            r, f = tests[name], linear[name]
+            # a figure the step test could not measure is a word: the rotor touched down (or never settled)
+            word = "touched down" if tests[name]["stops"] else "not reached"
+            r = {key: (word if isinstance(value, float) and not np.isfinite(value) else value)
+                 for key, value in tests[name].items()}
+            f = linear[name]
             readouts += [
                 (f"{name}: overshoot, reference step", r["reference_overshoot_percent"], "%"),
-                (f"{name}: settling time (±2 %)", r["reference_settling_time_s"] * 1e3, "ms"),
+                (f"{name}: settling time (±2 %)", _scaled(r["reference_settling_time_s"], 1e3), "ms"),
                 (f"{name}: peak control current, reference step", r["reference_peak_current_a"], "A"),
                 (f"{name}: RMS control current, reference step", r["reference_rms_current_a"], "A"),
                 (f"{name}: step stiffness Δf/x_max (linear)", f["step_stiffness_n_per_m"] * 1e-6, "N/µm"),
                 (f"{name}: min dynamic stiffness (linear, worst frequency)", f["min_dynamic_stiffness_n_per_m"] * 1e-6, "N/µm"),
-                (f"{name}: … at frequency", f["min_dynamic_stiffness_frequency_hz"], "Hz"),
-                (f"{name}: largest deviation, disturbance step", r["disturbance_max_deviation_m"] * 1e6, "µm"),
+                (f"{name}: frequency of the min dynamic stiffness", f["min_dynamic_stiffness_frequency_hz"], "Hz"),
+                (f"{name}: largest deviation, disturbance step", _scaled(r["disturbance_max_deviation_m"], 1e6), "µm"),
                 (f"{name}: s_dyn of the time run (chosen plant)",
-                 r["disturbance_dynamic_stiffness_n_per_m"] * 1e-6, "N/µm"),
-                (f"{name}: offset 150 ms after the disturbance step", r["disturbance_final_offset_m"] * 1e6, "µm"),
+                 _scaled(r["disturbance_dynamic_stiffness_n_per_m"], 1e-6), "N/µm"),
+                (f"{name}: offset 150 ms after the disturbance step", _scaled(r["disturbance_final_offset_m"], 1e6), "µm"),
             ]
         ratio = dominant_pole_ratio(poles)
         readouts += [
@@ -752,8 +765,8 @@ class LqgVsPid(Exercise):
         ]
         plots = step_plots(tests, values)
         pending_plots = plots + front_plots(values, None)
-        pending = [("Noise-driven RMS displacement", float("nan"), "computing …"),
-                   ("Trade-off fronts", float("nan"), "computing …")]
+        pending = [("Noise-driven RMS displacement", "computing …", ""),
+                   ("Trade-off fronts", "computing …", "")]
         yield Analysis(readouts + pending, poles, notes, pending_plots)
         readouts += [(f"{name}: noise-driven RMS displacement", linear[name]["noise_rms_x_m"] * 1e6, "µm")
                      for name in LOOPS]
@@ -835,11 +848,11 @@ class LqgVsPid(Exercise):
                 f"min_dynamic_stiffness_{key}_n_per_um": f["min_dynamic_stiffness_n_per_m"] * 1e-6,
                 f"min_dynamic_stiffness_frequency_{key}_hz": f["min_dynamic_stiffness_frequency_hz"],
                 f"noise_rms_current_linear_{key}_a": f["noise_rms_current_a"],
-                f"dynamic_stiffness_{key}_n_per_um": r["disturbance_dynamic_stiffness_n_per_m"] * 1e-6,
-                f"max_deviation_{key}_um": r["disturbance_max_deviation_m"] * 1e6,
-                f"offset_after_disturbance_{key}_um": r["disturbance_final_offset_m"] * 1e6,
+                f"dynamic_stiffness_{key}_n_per_um": _scaled(r["disturbance_dynamic_stiffness_n_per_m"], 1e-6),
+                f"max_deviation_{key}_um": _scaled(r["disturbance_max_deviation_m"], 1e6),
+                f"offset_after_disturbance_{key}_um": _scaled(r["disturbance_final_offset_m"], 1e6),
                 f"overshoot_{key}_percent": r["reference_overshoot_percent"],
-                f"settling_time_{key}_ms": r["reference_settling_time_s"] * 1e3,
+                f"settling_time_{key}_ms": _scaled(r["reference_settling_time_s"], 1e3),
                 f"peak_current_{key}_a": r["reference_peak_current_a"],
                 f"rms_current_{key}_a": r["reference_rms_current_a"],
                 f"peak_current_disturbance_{key}_a": r["disturbance_peak_current_a"],

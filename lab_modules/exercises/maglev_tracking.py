@@ -30,6 +30,7 @@ from lab_modules.controllers.feedback_linearisation import (
 )
 from lab_modules.controllers.lead_lag import LEAD_LAG
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises._common import MAGLEV_LAGS, magnet_plant_names
 from lab_modules.loops.maglev_loop import (
     CONTROLLERS,
     FILTERS,
@@ -229,9 +230,9 @@ class MaglevTracking(Exercise):
             ("Feedback gain k1", k[0], "1/s³"), ("Feedback gain k2", k[1], "1/s²"),
             ("Feedback gain k3", k[2], "1/s"),
             ("Equilibrium current at 14.8 mm (eq. 2.14)", current, "A"),
-            ("Equilibrium voltage R_c x3", TABLE_3_1.equilibrium_voltage_v(GAP_M), "V"),
-            ("Open-loop unstable pole √(2g/x0)", np.sqrt(2 * TABLE_3_1.gravity_m_per_s2 / GAP_M), "rad/s"),
-            ("Decoupling gain |1/L_gL_f²h| at x0", decoupling_gain_v_per_m_s3(GAP_M, current) * 1e3,
+            ("Equilibrium voltage at 14.8 mm", TABLE_3_1.equilibrium_voltage_v(GAP_M), "V"),
+            ("Open-loop unstable pole (linearised at 14.8 mm)", np.sqrt(2 * TABLE_3_1.gravity_m_per_s2 / GAP_M), "rad/s"),
+            ("Decoupling gain at 14.8 mm (eq. 2.17, inverted)", decoupling_gain_v_per_m_s3(GAP_M, current) * 1e3,
              "mV/(m/s³)"),
         ]
         chain = brunovsky_chain()
@@ -258,6 +259,11 @@ class MaglevTracking(Exercise):
         notes = [(f"Singularity guard: estimates with x̂1 < 1 mm or x̂3 < {GUARD_CURRENT_A * 1e3:.0f} mA are "
                  "clamped before eq. 2.23; the voltage grows as 1/x̂3 towards that edge.")]
         return Analysis(readouts, poles, notes, plots)
+
+    def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
+        """The linearised plant's poles by name (the loops' poles keep their generic kind)."""
+        name = "open-loop plant (linearised, 14.8 mm)"
+        return {name: magnet_plant_names(poles[name], TABLE_3_1.linear_model().A, "ball", MAGLEV_LAGS)}
 
     def simulation(self, values: dict) -> MaglevSimulation:
         return MaglevSimulation(setup(values), seed=int(values["seed"]))

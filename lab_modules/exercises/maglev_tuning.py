@@ -29,7 +29,9 @@ import scipy.stats
 from lab_modules import recordings
 from lab_modules.claims import Claim
 from lab_modules.estimators.continuous_discrete_ekf import OBSERVER_COLUMNS, run_observer
+from lab_modules.estimators.kalman import correction
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises._common import MAGLEV_LAGS, magnet_plant_names
 from lab_modules.loops.maglev_loop import MaglevSetup, loop_at_plant_input, preset_q
 from lab_modules.parameters import Parameter, ParameterError
 from lab_modules.plants.maglev_ball import TABLE_3_1
@@ -107,13 +109,24 @@ def recording(values: dict) -> recordings.Recording:
     return shipped_recording() if data is None else data
 
 
+def still_range_s(rec: recordings.Recording) -> tuple[float, float]:
+    """Where a still segment can lie [s]: the recording's own time span, to the end of its last
+    sample interval (the sliders follow it)."""
+    step = float(np.median(np.diff(rec.time_s))) if len(rec) > 1 else 0.0
+    return float(rec.time_s[0]), round(float(rec.time_s[-1]) + step, 9)
+
+
 def sensor_noise_m(rec: recordings.Recording, values: dict) -> float:
     """Eq. 3.3: sigma² = E[(y - mu)²] over the still segment (sample mean mu)."""
-    still = rec.window(values["still_start_s"], values["still_end_s"])
+    start, end = values["still_start_s"], values["still_end_s"]
+    first, last = still_range_s(rec)
+    if not first <= start < end <= last + 1e-9:
+        raise ParameterError(f"still segment {start:g} ... {end:g} s: start and end must lie inside the "
+                             f"recording's {first:g} ... {last:g} s, start before end")
+    still = rec.window(start, end)
     if np.count_nonzero(still) < 10:
-        raise ParameterError(f"still segment {values['still_start_s']:g} ... {values['still_end_s']:g} s "
-                             f"holds {np.count_nonzero(still)} samples; choose a window with at least 10 "
-                             f"inside the recording's 0 ... {rec.time_s[-1]:g} s")
+        raise ParameterError(f"still segment {start:g} ... {end:g} s holds {np.count_nonzero(still)} samples; "
+                             f"choose a window with at least 10 inside the recording's {first:g} ... {last:g} s")
     return float(np.std(rec.measured_m[still]))
 
 
@@ -135,14 +148,16 @@ def observe(rec: recordings.Recording, values: dict) -> dict[str, np.ndarray]:
     P0 = values["initial_covariance"] * np.eye(3)
     Q = filter_q(values)
     out = np.full((len(rec), len(OBSERVER_COLUMNS)), np.nan)
+    priors = np.full((len(rec), 12), np.nan)
     rows = run_observer(rec.time_s, rec.measured_m, rec.coil_voltage_v, x, P0, Q,
-                        sigma**2, TABLE_3_1.constants(), 1, out)
+                        sigma**2, TABLE_3_1.constants(), 1, out, priors)
     columns = {name: out[:, i] for i, name in enumerate(OBSERVER_COLUMNS)}
     columns.update(time_s=rec.time_s, reference_m=rec.reference_m, x_measured_m=rec.measured_m,
                    coil_voltage_v=rec.coil_voltage_v, zero=np.zeros(len(rec)),
                    filter_sensor_noise_m=np.full(len(rec), sigma))
     columns["rows"] = np.array(rows)
     columns["Q"] = Q
+    columns["priors"] = priors          # x⁻ and P⁻ before each sample's correction (filter inspector)
     return columns
 
 
@@ -240,6 +255,11 @@ class MaglevTuning(Exercise):
             rec = recordings.parse(filename, content, min_rows=needed)        # raises, naming the last line
         return rec
 
+    def parameter_ranges(self, values: dict) -> dict[str, tuple[float, float]]:
+        """The still-segment sliders span the loaded recording, not the parameters' 0 ... 3600 s."""
+        first, last = still_range_s(recording(values))
+        return {"still_start_s": (first, last), "still_end_s": (first, last)}
+
     def model(self, values: dict) -> dict:
         rec = recording(values)
         return {"states": ["x1 gap [m]", "x2 velocity [m/s]", "x3 current [A]"], "inputs": ["u coil [V]"],
@@ -265,9 +285,10 @@ class MaglevTuning(Exercise):
             ("Sensor noise σ from the still segment (eq. 3.3)", sensor_noise_m(rec, values) * 1e3, "mm"),
             ("Q22 used by the filter", float(observed["Q"][1, 1]), "m²/s³"),
             ("Mean NIS", nis["mean"], ""),
-            ("Mean NIS 95 % bounds", nis["mean_bounds"][0], f"… {nis['mean_bounds'][1]:.3f}"),
+            ("Mean NIS, lower 95 % bound", nis["mean_bounds"][0], ""),
+            ("Mean NIS, upper 95 % bound", nis["mean_bounds"][1], ""),
             (f"{NIS_WINDOW}-sample NIS windows inside 95 % bounds", nis["within_percent"], "%"),
-            ("Innovation autocorrelation inside ±1.96/√N (lags 1-50)",
+            ("Innovation autocorrelation inside its 95 % white-noise bound (lags 1-50)",
              float(np.mean(np.abs(acf[1:]) <= bound) * 100.0), "%"),
             ("Final σ position", observed["x_sigma_m"][rows - 1] * 1e6 if rows else np.nan, "µm"),
             ("Final σ velocity", observed["velocity_sigma_m_per_s"][rows - 1] * 1e3 if rows else np.nan, "mm/s"),
@@ -302,6 +323,13 @@ class MaglevTuning(Exercise):
         if rows < len(rec):
             notes.append(f"The filter diverged at t = {observed['time_s'][rows]:.3f} s.")
         return Analysis(readouts, linearised_poles(rec, observed), notes, plots)
+
+    def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
+        """The linearised plant's poles by name (at the recording's mean gap, as ``linearised_poles``)."""
+        rec = recording(values)
+        name = "open-loop plant (linearised)"
+        A = TABLE_3_1.linear_model(float(np.mean(rec.measured_m))).A
+        return {name: magnet_plant_names(poles[name], A, "ball", MAGLEV_LAGS)}
 
     def simulation(self, values: dict) -> Replay:
         return Replay(observe(recording(values), values))
@@ -364,12 +392,33 @@ class Replay:
         self.table = np.column_stack([observed["time_s"][:rows]] + [observed[c][:rows] for c in self.columns])
         self.diverged = rows < observed["time_s"].size
         self.sample_time_s = float(np.median(np.diff(observed["time_s"])))
+        self.priors = observed["priors"][:rows]
+        self.measured_m = observed["x_measured_m"][:rows]
+        self.r = float(observed["filter_sensor_noise_m"][0]) ** 2
         self.position = 0
+        self.stepped = False
 
     def advance(self, n_steps: int) -> np.ndarray:
         chunk = self.table[self.position:self.position + max(n_steps, 0)]
         self.position += chunk.shape[0]
+        self.stepped = n_steps == 1 and chunk.shape[0] == 1
         return chunk
+
+    def filter_state(self) -> dict | None:
+        """The continuous-discrete EKF (eq. 2.40-2.42, H = [1 0 0]) at the sample of the last
+        advance(1), redone from the prior the observer kept: corrected x̂ and P, gain K,
+        innovation and √S (like ``MaglevSimulation.filter_state``)."""
+        if not self.stepped:
+            return None
+        k = self.position - 1
+        x_prior, P_prior = self.priors[k, :3], self.priors[k, 3:].reshape(3, 3)
+        step = correction(x_prior, P_prior, [[1.0, 0.0, 0.0]], [self.r], [self.measured_m[k]])
+        return {"title": "continuous-discrete EKF replaying the recording (paper 004 §3.5)",
+                "time_s": float(self.table[k, 0]),
+                "states": (("air gap x₁", "m"), ("ball velocity x₂", "m/s"), ("coil current x₃", "A")),
+                "measurements": (("position sensor", "m"),),
+                "x": step["x"], "P": step["P"], "K": step["K"], "innovation": step["innovation"],
+                "innovation_sigma": np.sqrt(np.diag(step["S"]))}
 
     def status_message(self) -> str:
         if self.position < self.table.shape[0]:

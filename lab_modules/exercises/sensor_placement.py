@@ -45,7 +45,7 @@ import scipy.signal
 from lab_modules import analysis
 from lab_modules.claims import Claim
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
-from lab_modules.exercises._common import pid_from_values
+from lab_modules.exercises._common import AXIS_LAGS, nearest_names, pid_from_values
 from lab_modules.loops.flexible_rotor_loop import (
     LOOP_OUTPUTS,
     LoopSimulation,
@@ -216,6 +216,34 @@ def mode_poles(system: control.StateSpace, n_modes: int) -> np.ndarray:
     return chosen
 
 
+def mode_name(j: int) -> str:
+    """The physical name of rotor mode ``j`` (0-based): mode 1 is the rigid tilting about the
+    ball bearing, the others bend the shaft."""
+    if j == 0:
+        return "rotor mode 1 (rigid tilting)"
+    ordinal = {1: "1st", 2: "2nd", 3: "3rd"}.get(j, f"{j}th")
+    return f"rotor mode {j + 1} ({ordinal} bending)"
+
+
+def plant_mode_names(values: dict, poles_s: np.ndarray) -> list[str | None]:
+    """Names of the open-loop plant's poles: the mechanical block (modal states) is coupled by
+    the magnet's negative stiffness k_x, so each of its eigenvalues is named after the mode that
+    holds most of its modal energy |η_j|² (ω_j² + |s|²); the amplifier and the sensor lag add
+    one real pole each (the plant is block triangular)."""
+    n = int(values["modes"])
+    r = rotor(values["modal_damping_percent"] / 100)
+    lag = values["sensor_lag_us"] * 1e-6
+    A = np.asarray(modal_plant(r, GEOMETRY.bearing_m + values["sensor_offset_mm"] * 1e-3, n, lag).A)
+    s, vectors = np.linalg.eig(A[:2 * n, :2 * n])
+    omega = 2 * np.pi * r.natural_frequencies_hz(n)
+    energy = np.abs(vectors[:n]) ** 2 * (omega[:, None] ** 2 + np.abs(s)[None, :] ** 2)
+    named = [(complex(p), mode_name(int(j))) for p, j in zip(s, np.argmax(energy, axis=0))]
+    named.append((complex(-1.0 / RIG.amplifier_lag_s), AXIS_LAGS[0]))
+    if lag > 0:
+        named.append((complex(-1.0 / lag), AXIS_LAGS[1]))
+    return nearest_names(poles_s, named)
+
+
 def damping(poles_s: np.ndarray) -> np.ndarray:
     return -poles_s.real / np.maximum(np.abs(poles_s), 1e-12)
 
@@ -361,6 +389,15 @@ class SensorPlacement(Exercise):
         """The closed loop's state matrices at these gain factors."""
         return [np.asarray(loop(values, factor).A) for factor in factors], T
 
+    def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
+        """The rotor's modes by name in the plant and the closed loop (``mode_poles``: by modal
+        energy), the amplifier and sensor lag in the plant; the controller's and the filter's
+        poles keep their generic kind."""
+        chosen = mode_poles(loop(values), int(values["modes"]))
+        return {"open-loop plant": plant_mode_names(values, poles["open-loop plant"]),
+                "closed loop": nearest_names(poles["closed loop"],
+                                              [(complex(p), mode_name(j)) for j, p in enumerate(chosen)])}
+
     def model(self, values: dict) -> dict:
         r = rotor(values["modal_damping_percent"] / 100)
         n = int(values["modes"])
@@ -398,7 +435,7 @@ class SensorPlacement(Exercise):
         sensor = "integrated capacitive" if integrated(values["sensor_offset_mm"]) else "eddy-current track"
         readouts = [(f"Natural frequency, mode {j + 1}", f, "Hz") for j, f in enumerate(frequencies)]
         readouts += [("Largest stable gain factor here", max_gain, "×"),
-                     ("Mode that goes unstable first", float(first_mode or 0), "mode #"),
+                     ("Mode that goes unstable first", f"mode {first_mode}" if first_mode else "none", ""),
                      ("Sensor noise σ (" + sensor + ")", sensor_noise_m(values) * 1e6, "µm")]
         for j in range(n):
             readouts += [(f"Mode {j + 1}: residue sign φ(actuator)·φ(sensor)", float(signs[j]), ""),
@@ -451,7 +488,9 @@ class SensorPlacement(Exercise):
         def explain() -> str:
             modes_s = mode_poles(closed, int(values["modes"]))
             if stable(closed):
-                return "The linear loop is stable: the reference step or the noise was too large."
+                return ("The linear loop is stable: the reference step (the PID's derivative kick on the "
+                        "step) or the noise was too large. Set the reference step to 0 to see the loop's own "
+                        "stability.")
             return (f"The loop is unstable: {unstable_mode_sentence(modes_s)}. "
                     "Move the sensor or change the gain, then reset.")
         return LoopSimulation(closed, simulation_inputs(values), values["disturbance_force_n"],

@@ -26,7 +26,7 @@ import numpy as np
 import scipy.linalg
 
 from lab_modules import analysis
-from lab_modules.controllers.feedback_linearisation import feedback_gain, linearising_control
+from lab_modules.controllers.feedback_linearisation import GUARD_CURRENT_A, feedback_gain, linearising_control
 from lab_modules.controllers.lead_lag import LEAD_LAG, LeadLag
 from lab_modules.controllers.pid import controller_step
 from lab_modules.estimators.continuous_discrete_ekf import bucy_step, propagate, update
@@ -251,6 +251,7 @@ class MaglevSimulation:
         self.u0 = setup.plant.equilibrium_voltage_v(setup.reference.base_m)
         self.steps = 0
         self.status = OK
+        self.guarded_steps = 0                        # controller steps clamped by the singularity guard
         self._last_correction = None                   # (prior x̂, prior P, y, time) of the last sample
 
     def advance(self, n_steps: int) -> np.ndarray:
@@ -277,6 +278,7 @@ class MaglevSimulation:
             done, self.status = part(0, n_steps)
             self._last_correction = None
         self.steps += done
+        self.guarded_steps += int(np.sum(trace[:done, 1 + COLUMN["guarded"]]))
         return trace[:done]
 
     def filter_state(self) -> dict | None:
@@ -299,8 +301,15 @@ class MaglevSimulation:
     def status_message(self) -> str:
         if self.status == OK:
             return ""
-        return STATUS_TEXT[self.status].format(MIN_GAP_M * 1e3 if self.status == STRUCK_MAGNET
+        text = STATUS_TEXT[self.status].format(MIN_GAP_M * 1e3 if self.status == STRUCK_MAGNET
                                                else MAX_GAP_M * 1e3)
+        if self.guarded_steps and self.setup.controller == "linearising":
+            text += (f" At t = {self.steps * self.sample_time_s:.3f} s, after {self.guarded_steps} guarded controller "
+                     f"step(s): the estimated current x̂3 fell to the guard's {GUARD_CURRENT_A * 1e3:.0f} mA, where "
+                     "eq. 2.23 asks for a voltage growing as 1/x̂3. Noisy estimates times large gains k (fast "
+                     "poles, or the first samples while P0 is large) drove it there: less sensor noise or "
+                     "slower poles keep x̂3 away from 0.")
+        return text
 
     def run(self, duration_s: float) -> dict[str, np.ndarray]:
         """Whole run as columns (``time_s`` plus ``TRACE_COLUMNS``)."""
