@@ -24,6 +24,14 @@ import numpy as np
 import viser
 
 SHRINK_AFTER_S = 3.0          # a range three times too large for this long shrinks
+#: For its first frames a scope shows a range this much wider than the traces need, then the
+#: range itself.  uPlot lays out a chart's axes when a scale changes; a chart whose scale was set
+#: before its panel had a size (right after a tab opened or an exercise switch) kept blank axes, no
+#: tick labels at all, for as long as its range held still, and a later resize did not help (seen on
+#: kalman_noise's and ekf_parameters' current charts; issue 11, defect 13).  The one planned change
+#: of range lays the axes out again once the chart has its size.
+SETTLE_FRAMES = 50
+SETTLE_WIDEN = 1.5
 HEADROOM = 1.2                # the range covers the traces with this factor
 PADDING = (12, 16, 0, 4)      # top, right, bottom, left [px]: the top tick label stays inside the chart
 Y_AXIS_SIZE = 56              # px for the y tick labels (five significant characters)
@@ -60,16 +68,28 @@ class StickyRange:
     def __init__(self) -> None:
         self.range: tuple[float, float] | None = None
         self.loose_since: float | None = None
+        self.frames = 0
+
+    def shown(self) -> tuple[float, float] | None:
+        """The range the anchor spans this frame: ``range``, widened for the first ``SETTLE_FRAMES``."""
+        if self.range is None or self.frames >= SETTLE_FRAMES:
+            return self.range
+        low, high = self.range
+        if low < 0 < high:
+            return (low * SETTLE_WIDEN, high * SETTLE_WIDEN)
+        return (low - (SETTLE_WIDEN - 1) * (high - low), high)
 
     def update(self, columns: list[np.ndarray], now: float | None = None) -> bool:
         """Follow the traces; True if the range changed."""
         finite = np.concatenate([c[np.isfinite(c)] for c in columns]) if columns else np.zeros(0)
         if finite.size == 0:
-            return False
+            return self.follow(math.inf, -math.inf, now)
         return self.follow(float(finite.min()), float(finite.max()), now)
 
     def follow(self, low: float, high: float, now: float | None = None) -> bool:
-        """``update`` from the lowest and highest finite value drawn (nothing finite: low > high)."""
+        """``update`` from the lowest and highest finite value drawn (nothing finite: low > high);
+        called once per frame."""
+        self.frames += 1
         if not low <= high:
             return False
         now = time.perf_counter() if now is None else now

@@ -58,8 +58,9 @@ LOG_SCALE = {"distr": 3, "log": 10}   # uPlot's logarithmic scale
 LOG_DECADES = 4                   # a logarithmic plot shows at most this many decades
 #: What the number boxes beside the sliders do with unusual entries (the browser handles them, unseen
 #: by the server: issue 11, defect 10)
-NUMBER_BOX_HINT = ("*Number boxes: type a decimal point (1.5, not 1,5); a value beyond a slider's ends is "
-                   "set to the nearest end; an emptied box keeps the value in use.*")
+NUMBER_BOX_HINT = ("*Number boxes: 0.5 or 0,5; a value beyond a slider's ends (its range, shown under it) is "
+                   "refused and the box shows the value in use again; letters are not taken, and an emptied "
+                   "box changes nothing.*")
 PANEL_TABS = (("Scope", viser.Icon.WAVE_SINE), ("Pole map", viser.Icon.CHART_DOTS),
               ("Analysis", viser.Icon.CHART_LINE), ("Worksheet", viser.Icon.NOTEBOOK))
 AUTOSAVE_AFTER_S = 1.0            # a tab's autosave is written this long after its last change
@@ -104,6 +105,11 @@ def escaped(text) -> str:
     Markdown renders raw HTML)."""
     text = re.sub(r"([\\`*_{}\[\]()#+\-.!|~])", r"\\\1", str(text))
     return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+
+
+def _with_range(parameter: Parameter) -> str:
+    """A number control's hint: its description and its valid range."""
+    return f"{parameter.description.rstrip('.')}. Range: {parameter.valid_range().replace('...', '…')}."
 
 
 def _cell(text: str) -> str:
@@ -473,6 +479,7 @@ class LabSession:
             download.on_click(self._on("download", self._on_download))
             self.download_note = gui.add_markdown("")     # what the button did, where the student looks
         self.inputs: dict[str, viser.GuiInputHandle] = {}
+        self.refused: dict[str, bool] = {}            # boxes being put back to the value in use (_refuse)
         groups: dict[str, list[Parameter]] = {}
         for parameter in self.exercise.parameters:
             groups.setdefault(parameter.group, []).append(parameter)
@@ -572,14 +579,14 @@ class LabSession:
             # three decimals of the exponent (0.2 % of the value) fit the number box
             handle = gui.add_slider(f"log₁₀ {label}", np.log10(parameter.minimum), np.log10(parameter.maximum),
                                     step=0.001, initial_value=round(float(np.log10(value)), 3),
-                                    hint=parameter.description)
+                                    hint=_with_range(parameter))
         elif parameter.integer:
             handle = gui.add_number(label, int(value), min=int(parameter.minimum),
-                                    max=int(parameter.maximum), step=1, hint=parameter.description)
+                                    max=int(parameter.maximum), step=1, hint=_with_range(parameter))
         else:
             handle = gui.add_slider(label, parameter.minimum, parameter.maximum,
                                     step=parameter.step or (parameter.maximum - parameter.minimum) / 1000,
-                                    initial_value=float(value), hint=parameter.description)
+                                    initial_value=float(value), hint=_with_range(parameter))
         handle.on_update(self._on(("input", parameter.name), lambda p=parameter, h=handle: self._on_input(p, h.value)))
         return handle
 
@@ -619,8 +626,10 @@ class LabSession:
         try:
             value = parameter.parse(value)
         except ParameterError as error:
-            self.error.content = f"⚠️ {escaped(error)}"
+            self._refuse(parameter, error)
             return
+        if self.refused.pop(parameter.name, False) and np.isclose(value, self.values[parameter.name], rtol=1e-2):
+            return                                    # the box put back by _refuse: its message stays
         self.error.content = ""
         self.scene_quiet_until = time.perf_counter() + SCENE_QUIET_AFTER_INPUT_S
         with self.lock:
@@ -642,6 +651,17 @@ class LabSession:
                 self.scene.update(dict(self.values))
             except Exception as error:  # noqa: BLE001 - the 3D view is not worth the lab
                 self._problem("3D view", error)
+
+    def _refuse(self, parameter: Parameter, error: ParameterError) -> None:
+        """A value beyond the range (typed into a number box) is refused, not clamped: the message
+        names the range and the value in use, which the box shows again (issue 11, defect 10)."""
+        in_use = self.values[parameter.name]
+        unit = f" {parameter.unit}" if parameter.unit and not parameter.choices else ""
+        self.error.content = f"⚠️ {escaped(error)}; the lab keeps {escaped(f'{in_use:g}' if not parameter.choices else in_use)}{escaped(unit)}."
+        handle = self.inputs.get(parameter.name)
+        if handle is not None and not parameter.choices:
+            self.refused[parameter.name] = True
+            handle.value = round(float(np.log10(in_use)), 3) if parameter.log else in_use
 
     def _on_upload(self, uploaded) -> None:
         try:
@@ -934,7 +954,7 @@ class LabSession:
                 t_ms, t32, ys, low, high = frames.chart_frame(buffer, *plan, sample_time, self.window_ms,
                                                               SCOPE_BUCKETS, ROUGHNESS_ROWS)
                 y_range.follow(low, high, now)
-                ys[-1, 0::2], ys[-1, 1::2] = y_range.range or (0.0, 0.0)   # the anchor series (scope.anchor)
+                ys[-1, 0::2], ys[-1, 1::2] = y_range.shown() or (0.0, 0.0)   # the anchor series (scope.anchor)
                 data = (t32 if float32_time else t_ms, *ys)
                 # Straight to the wire: the handle's ``data`` setter would cast every column to float64.
                 handle._impl.props.data = data

@@ -18,6 +18,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from app.typeset import typeset
 from lab_modules.claims import markdown_table, render_worksheet
 from lab_modules.exercises import Exercise
 
@@ -55,9 +56,10 @@ def _measure(name: str) -> list[float]:
 
 
 def text(exercise: Exercise, values: list[float] | None = None) -> str:
-    """The worksheet with its claims table (``values`` None: "…" in the lab column)."""
+    """The worksheet with its claims table (``values`` None: "…" in the lab column) and its
+    formulas typeset (``app.typeset``)."""
     sheet = (STATIC / "worksheets" / exercise.worksheet).read_text(encoding="utf-8")
-    return render_worksheet(sheet, markdown_table(exercise.claims, values))
+    return typeset(render_worksheet(sheet, markdown_table(exercise.claims, values)))
 
 
 def current(exercise: Exercise) -> str:

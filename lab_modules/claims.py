@@ -10,6 +10,7 @@ the same objects, so no lab number is typed twice.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 
 
@@ -105,8 +106,13 @@ def status(claim: Claim, value: float | None) -> str:
     return "deviation (holds)" if claim.deviation else "pass"
 
 
+def _plain(text: str) -> str:
+    """Plain text in Markdown: identifiers such as ``gain_factor`` must not italicise."""
+    return re.sub(r"([\\`*_$])", r"\\\1", text)
+
+
 def _cell(text: str) -> str:
-    return text.replace("|", "\\|").replace("\n", " ")
+    return _plain(text).replace("|", "\\|").replace("\n", " ")
 
 
 def markdown_table(claims: tuple[Claim, ...], values: list[float | None] | None = None) -> str:
@@ -120,7 +126,7 @@ def markdown_table(claims: tuple[Claim, ...], values: list[float | None] | None 
         quantity = claim.quantity + (f" (at {settings_text(claim.settings)})" if claim.settings else "")
         rows.append("| " + " | ".join(_cell(text) for text in (
             claim.source, quantity, claim.paper, lab, claim.accept_text(), status(claim, value))) + " |")
-    notes = [f"- *{claim.quantity}*{' (deviation)' if claim.deviation else ''}: {claim.note}"
+    notes = [f"- *{_plain(claim.quantity)}*{' (deviation)' if claim.deviation else ''}: {_plain(claim.note)}"
              for claim in claims if claim.note]
     return "\n".join(rows + ([""] + notes if notes else []))
 
