@@ -48,9 +48,10 @@ def column_unit(name: str, charts: tuple[Chart, ...] = ()) -> str:
     return "1"
 
 
-def _number(value: float) -> str:
-    """Shortest text that reads back as the same float (``repr``)."""
-    return repr(float(value))
+def _number(value: float | str) -> str:
+    """Shortest text that reads back as the same float (``repr``); a word readout
+    ("touched down", "computing …") as it is shown."""
+    return _csv_field(value) if isinstance(value, str) else repr(float(value))
 
 
 def _csv_field(text: str) -> str:

@@ -25,6 +25,7 @@ from app import scope
 from lab_modules.exercises import Exercise, Plot
 
 LIVE_PERIOD_S = 0.25              # live plots: at most 4 updates/s (self_sensing: ~14 kB per update)
+LIVE_SETTLE_FRAMES = 8            # ~2 s widened, then the range: lays out the axes once sized (scope.SETTLE_FRAMES)
 LIVE_ASPECT = 2.2                 # as the scope charts
 SHADE_FILL = "rgba(31,119,180,0.12)"
 HIDDEN = {"stroke": "rgba(0,0,0,0)", "width": 0, "points": viser.uplot.Series_Points(show=False)}
@@ -70,7 +71,7 @@ class LivePlots:
         """Add the charts to the current container (the Scope tab), empty until the first draw."""
         self.exercise = exercise
         plots = exercise.live_plots(simulation)
-        self.ranges = [scope.StickyRange() for _ in plots]
+        self.ranges = [scope.StickyRange(LIVE_SETTLE_FRAMES) for _ in plots]
         self.shown = [(p.title, float(p.x[0]), float(p.x[-1])) for p in plots]
         self.handles = [gui.add_uplot(chart_data(plot, None), _series(plot), **_options(plot), aspect=LIVE_ASPECT)
                         for plot in plots]
@@ -86,7 +87,7 @@ class LivePlots:
         for index, (plot, handle) in enumerate(zip(self.exercise.live_plots(simulation), self.handles)):
             y_range = self.ranges[index]
             y_range.update([np.asarray(y, dtype=float) for _, y, _ in plot.series], now)
-            data = chart_data(plot, y_range.range)
+            data = chart_data(plot, y_range.shown())
             shown = (plot.title, float(plot.x[0]), float(plot.x[-1]))
             if shown != self.shown[index]:            # rare: a new period length or sample time
                 self.shown[index] = shown

@@ -65,14 +65,15 @@ def nice_range(low: float, high: float) -> tuple[float, float]:
 class StickyRange:
     """A y range that only moves when it must (see the module docstring)."""
 
-    def __init__(self) -> None:
+    def __init__(self, settle_frames: int = SETTLE_FRAMES) -> None:
         self.range: tuple[float, float] | None = None
         self.loose_since: float | None = None
         self.frames = 0
+        self.settle_frames = settle_frames
 
     def shown(self) -> tuple[float, float] | None:
-        """The range the anchor spans this frame: ``range``, widened for the first ``SETTLE_FRAMES``."""
-        if self.range is None or self.frames >= SETTLE_FRAMES:
+        """The range the anchor spans this frame: ``range``, widened for the first ``settle_frames``."""
+        if self.range is None or self.frames >= self.settle_frames:
             return self.range
         low, high = self.range
         if low < 0 < high:

@@ -483,10 +483,11 @@ class LabSession:
         groups: dict[str, list[Parameter]] = {}
         for parameter in self.exercise.parameters:
             groups.setdefault(parameter.group, []).append(parameter)
+        ranges = self.exercise.parameter_ranges(dict(self.values))   # sliders open on their followed range
         for index, (group, parameters) in enumerate(groups.items()):
             with gui.add_folder(group, expand_by_default=index == 0 or group in ("Controller", "Run")):
                 for parameter in parameters:
-                    self.inputs[parameter.name] = self._add_input(parameter)
+                    self.inputs[parameter.name] = self._add_input(parameter, ranges.get(parameter.name))
         gui.add_markdown(NUMBER_BOX_HINT)
         gui.add_html(scope.LEGEND_STYLE)
         self.error = gui.add_markdown("")
@@ -570,7 +571,7 @@ class LabSession:
                         handle.content = sheet
         worksheets.when_measured(self.exercise, show_measured)
 
-    def _add_input(self, parameter: Parameter):
+    def _add_input(self, parameter: Parameter, span: tuple[float, float] | None = None):
         gui, value = self.client.gui, self.values[parameter.name]
         label = f"{parameter.label} [{parameter.unit}]" if parameter.unit else parameter.label
         if parameter.choices:
@@ -584,9 +585,10 @@ class LabSession:
             handle = gui.add_number(label, int(value), min=int(parameter.minimum),
                                     max=int(parameter.maximum), step=1, hint=_with_range(parameter))
         else:
-            handle = gui.add_slider(label, parameter.minimum, parameter.maximum,
+            low, high = span if span and span[1] > span[0] else (parameter.minimum, parameter.maximum)
+            handle = gui.add_slider(label, low, high,
                                     step=parameter.step or (parameter.maximum - parameter.minimum) / 1000,
-                                    initial_value=float(value), hint=_with_range(parameter))
+                                    initial_value=min(max(float(value), low), high), hint=_with_range(parameter))
         handle.on_update(self._on(("input", parameter.name), lambda p=parameter, h=handle: self._on_input(p, h.value)))
         return handle
 
