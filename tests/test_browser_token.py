@@ -15,7 +15,7 @@ import time
 import msgspec
 import pytest
 
-from app.browser_bench import CHROMIUM, CHROMIUM_FLAGS, ROOT, VIEWPORT, free_port
+from app.browser_bench import ROOT, VIEWPORT, free_port
 from app.load_bench import PROTOCOL, wait_http
 from tests.conftest import browser_only
 from tests.wsclient import CAMERA
@@ -79,20 +79,19 @@ def _lab_with_token(tmp_path):
 
 
 @pytest.fixture
-def page_factory():
-    sync_api = pytest.importorskip("playwright.sync_api")
-    with sync_api.sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_FLAGS)
-        pages = []
+def page_factory(browser):
+    """New pages of the suite's one browser (a second Playwright would clash with its event loop)."""
+    pages = []
 
-        def new_page():
-            page = browser.new_page(viewport=VIEWPORT)
-            page.errors = []
-            page.on("pageerror", lambda e: page.errors.append(str(e)))
-            pages.append(page)
-            return page
-        yield new_page
-        browser.close()
+    def new_page():
+        page = browser.new_page(viewport=VIEWPORT)
+        page.errors = []
+        page.on("pageerror", lambda e: page.errors.append(str(e)))
+        pages.append(page)
+        return page
+    yield new_page
+    for page in pages:
+        page.close()
 
 
 def test_token_gate_and_foreign_origin(tmp_path, page_factory):
