@@ -204,6 +204,7 @@ def serve_hall(settings, workers: int, first_worker_port: int | None, allow_orig
     HAProxy until Ctrl-C or SIGTERM."""
     from app.access import check_bindable
     from app.server import shown_url
+    from app.store import Store, StoreError
     haproxy = shutil.which("haproxy")
     if haproxy is None:
         print(f"error: {HAPROXY_MISSING}", file=sys.stderr)
@@ -221,6 +222,10 @@ def serve_hall(settings, workers: int, first_worker_port: int | None, allow_orig
     if busy:
         raise ParameterError(f"worker port(s) {', '.join(map(str, busy))} already in use: choose others "
                              "with --worker-ports FIRST")
+    try:
+        Store(settings.data_dir).close()      # create the shared database once, before the workers race
+    except StoreError as error:
+        raise ParameterError(str(error)) from None
     pool = [Worker(k + 1, p, worker_command(p, settings, allow_origins)) for k, p in enumerate(ports)]
     previous = {s: signal.signal(s, _raise_stop) for s in (signal.SIGINT, signal.SIGTERM)}
     proxy: subprocess.Popen | None = None

@@ -110,15 +110,32 @@ class Store:
             raise StoreError(f"data directory {str(directory)!r}: {error.strerror}") from None
         self.path = directory / DATABASE_NAME
         self._lock = threading.Lock()
+        deadline = time.monotonic() + BUSY_TIMEOUT_S
+        while True:
+            try:
+                self._db = self._open()
+                return
+            except sqlite3.OperationalError as error:
+                # Switching a new file to WAL takes an exclusive lock and SQLite does not wait
+                # for it: several processes opening a fresh database at once retry here.
+                if "locked" not in str(error) or time.monotonic() > deadline:
+                    raise StoreError(f"database {str(self.path)!r}: {error}") from None
+                time.sleep(0.05)
+            except sqlite3.Error as error:
+                raise StoreError(f"database {str(self.path)!r}: {error}") from None
+
+    def _open(self) -> sqlite3.Connection:
+        db = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_S, check_same_thread=False,
+                             isolation_level=None)   # explicit transactions below
         try:
-            self._db = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_S, check_same_thread=False,
-                                       isolation_level=None)   # explicit transactions below
-            self._db.execute("PRAGMA journal_mode=WAL")
-            self._db.execute("PRAGMA synchronous=NORMAL")
-            self._db.execute("PRAGMA foreign_keys=ON")
-            self._db.executescript(SCHEMA)
-        except sqlite3.Error as error:
-            raise StoreError(f"database {str(self.path)!r}: {error}") from None
+            db.execute("PRAGMA journal_mode=WAL")
+            db.execute("PRAGMA synchronous=NORMAL")
+            db.execute("PRAGMA foreign_keys=ON")
+            db.executescript(SCHEMA)
+        except sqlite3.Error:
+            db.close()
+            raise
+        return db
 
     def close(self) -> None:
         with self._lock:

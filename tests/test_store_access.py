@@ -87,3 +87,25 @@ def test_token_and_origin():
     assert not policy.permits("null", "10.0.0.5:8080")
     with pytest.raises(ParameterError):
         OriginPolicy(["not an origin"])
+
+OPEN_FRESH = """
+import sys, time
+from app.store import Store
+time.sleep(max(0.0, float(sys.argv[2]) - time.time()))    # all processes open at the same instant
+Store(sys.argv[1]).save("kalman_noise", {})
+"""
+
+
+@pytest.mark.parametrize("round_", range(3))
+def test_processes_opening_a_fresh_database_at_once(tmp_path, round_):
+    """Lab processes started together (``serve --workers``) all open a new database: switching it
+    to WAL takes an exclusive lock that SQLite does not wait for, so none may fail on it."""
+    import subprocess
+    import sys
+    import time
+    start = time.time() + 1.5
+    processes = [subprocess.Popen([sys.executable, "-c", OPEN_FRESH, str(tmp_path), str(start)],
+                                  stderr=subprocess.PIPE, text=True) for _ in range(6)]
+    errors = [p.communicate(timeout=60)[1] for p in processes]
+    assert [p.returncode for p in processes] == [0] * 6, errors
+    assert Store(tmp_path).count() == 6
