@@ -10,25 +10,9 @@ import time
 from app import pole_map
 from lab_modules.exercises import get
 from tests.conftest import browser_only
+from tests.page_reading import pole_maps as _maps
 
 pytestmark = browser_only
-
-#: the visible pole maps: title, x range, legend labels
-MAPS_JS = """() => Object.values((window.__viserTestpoints || {}).uplots || {}).map(v => v.chart)
-    .filter(c => c.root.offsetParent !== null && /poles/i.test((c.root.querySelector('.u-title') || {}).innerText || ''))
-    .map(c => ({title: c.root.querySelector('.u-title').innerText, x: [c.scales.x.min, c.scales.x.max],
-                labels: c.series.slice(1).map(s => s.label), strokes: c.series.slice(1).map(s => s._stroke || s.stroke),
-                top: (c.axes[2] || {})._values || null}))"""
-
-
-def _maps(page, count: int = 2) -> list[dict]:
-    deadline = time.time() + 15
-    maps = page.evaluate(MAPS_JS)
-    while len(maps) < count and time.time() < deadline:
-        time.sleep(0.25)
-        maps = page.evaluate(MAPS_JS)
-    assert len(maps) == count, maps
-    return maps
 
 
 def test_pole_map_legend_ranges_and_locus(open_tab, tmp_path):
