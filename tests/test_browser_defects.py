@@ -171,6 +171,16 @@ def _status(page) -> str:
     return page.evaluate(STATUS_JS)
 
 
+def _reset(page) -> None:
+    """Restart the run and wait until the status line says so (not the previous run's stop)."""
+    before = _status(page)
+    page.get_by_role("button", name="Reset").click()
+    deadline = time.time() + 15
+    while _status(page) not in ("Running", "") and _status(page) == before and time.time() < deadline:
+        time.sleep(0.1)
+    assert _status(page) != before or before == "Running", before
+
+
 def _run_for(page, simulated_s: float, timeout_s: float = 40.0) -> str:
     """Let the run go on for ``simulated_s`` (summed from the speed line) or until it stops."""
     done, last, deadline = 0.0, time.time(), time.time() + timeout_s
@@ -207,12 +217,12 @@ def test_sensor_placement_task_4_stops_on_an_unstable_mode_not_on_the_current_li
 
     tab.set_number("Common gain factor [×]", f"{math.floor(95 * limit) / 100:.2f}")   # stable, above 1.3
     time.sleep(1.0)
-    page.get_by_role("button", name="Reset").click()
+    _reset(page)
     assert _run_for(page, 0.4) == "Running", "the run stopped at a stable gain factor"
 
     tab.set_number("Common gain factor [×]", f"{math.ceil(104 * limit) / 100:.2f}")   # just unstable
     time.sleep(1.0)
-    page.get_by_role("button", name="Reset").click()
+    _reset(page)
     stopped = _run_for(page, 2.0)
     assert stopped.startswith("Stopped:") and f"{mode} grows" in stopped, stopped
     assert "loop is stable" not in stopped and "unstable" in stopped, stopped   # the mode, not the step's kick
