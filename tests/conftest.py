@@ -57,11 +57,11 @@ class Tab:
         box.fill(value)
         box.press("Enter")
 
-    def switch_exercise(self, title: str) -> None:
+    def switch_exercise(self, title: str, timeout_ms: float = 30000) -> None:
         """Choose ``title`` in the Exercise dropdown and wait for its heading."""
         self.page.get_by_label("Exercise", exact=True).first.click()
         self.page.get_by_role("option", name=title, exact=True).click()
-        self.page.get_by_role("heading", name=title, exact=True).wait_for(timeout=30000)
+        self.page.get_by_role("heading", name=title, exact=True).wait_for(timeout=timeout_ms)
 
     def open_panel_tab(self, name: str) -> None:
         self.page.get_by_role("tab", name=name).click()

@@ -19,6 +19,7 @@ from tests.page_reading import LEGEND_JS, MAPS_JS, pole_maps, readout_rows, show
 from tests.test_student_path_defects import _check_readouts
 
 pytestmark = browser_only
+SWITCH_TIMEOUT_MS = 90000         # a switch on the shared machine at load 20 can take over 30 s
 ANALYSIS_WAIT_S = 5.0             # a slow analysis ("computing …") is checked as the word it shows
 STATUS_JS = """() => [...document.querySelectorAll('p, strong')].filter(e => e.offsetParent !== null)
     .map(e => e.innerText.trim()).filter(t => /^(Running|Paused|Stopped:)/.test(t))[0] || ''"""
@@ -67,7 +68,7 @@ def walk(tab) -> dict[str, dict]:
     for number, exercise in enumerate(registry().values()):
         started = time.time()
         if number:
-            tab.switch_exercise(exercise.title)
+            tab.switch_exercise(exercise.title, SWITCH_TIMEOUT_MS)
         tab.open_panel_tab("Scope")
         rows = _settled_rows(page, exercise.name)
         tab.open_panel_tab("Pole map")
@@ -196,7 +197,7 @@ def _run_for(page, simulated_s: float, timeout_s: float = 40.0) -> str:
 
 def test_sensor_placement_task_4_stops_on_an_unstable_mode_not_on_the_current_limit(tab):
     page = tab.page
-    tab.switch_exercise(get("sensor_placement").title)
+    tab.switch_exercise(get("sensor_placement").title, SWITCH_TIMEOUT_MS)
     tab.open_panel_tab("Worksheet")
     task = page.locator("li:visible").filter(has_text="Integrated sensor.").first
     task.wait_for(timeout=10000)
