@@ -72,7 +72,7 @@ def walk(tab) -> dict[str, dict]:
         tab.open_panel_tab("Scope")
         rows = _settled_rows(page, exercise.name)
         tab.open_panel_tab("Pole map")
-        page.get_by_text("Colours (every exercise)", exact=False).first.wait_for(timeout=20000)
+        page.get_by_text("Colours (every exercise)", exact=False).first.wait_for(timeout=60000)
         maps = _settled_maps(page, maps)
         shown[exercise.name] = {"rows": rows, "maps": maps, "legend": page.evaluate(LEGEND_JS)}
         tab.open_panel_tab("Scope")
