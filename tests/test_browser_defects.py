@@ -38,9 +38,11 @@ def tab(browser, lab_url):
 def _settled_rows(page, name: str) -> list[tuple[str, str, str]]:
     """The readouts once the full analysis has landed (kalman_noise: its 4 s consistency run),
     or after ``ANALYSIS_WAIT_S`` with whatever is still computing."""
+    deadline = time.time() + 60.0
+    while not (rows := readout_rows(page)) and time.time() < deadline:
+        time.sleep(0.25)
     deadline = time.time() + (60.0 if name == "kalman_noise" else ANALYSIS_WAIT_S)
-    rows = readout_rows(page)
-    while (not rows or any(value.startswith("computing") for _, value, _ in rows)) and time.time() < deadline:
+    while any(value.startswith("computing") for _, value, _ in rows) and time.time() < deadline:
         time.sleep(0.25)
         rows = readout_rows(page)
     return rows
