@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import viser
 
-from app import export, frames, inspector, layout, margins, pole_map, scope, worksheets
+from app import export, frames, inspector, layout, margins, mode_picker, pole_map, scope, worksheets
 from app.access import token_matches
 from app.actions import ActionPanel
 from app.live import LivePlots, SpeedMeter
@@ -530,6 +530,8 @@ class LabSession:
             self.shown_poles = pole_map.view(self.exercise, dict(self.values), first.poles)
             self.pole_plots = tuple(gui.add_uplot(data, **options, aspect=1.6)
                                     for data, options in pole_map.charts(self.shown_poles))
+            self.mode_picker = mode_picker.ModePicker(gui, self.pole_plots, self.shown_poles)
+            self.mode_picker.dropdown.on_update(self._on("show mode", self._pick_mode))
             gui.add_markdown(pole_map.legend_markdown())
             gui.add_markdown("Poles in the s-plane (discrete poles mapped by s = ln z / T); the dashed line is "
                              "the imaginary axis, right of it is unstable. The first map leaves out the fast, "
@@ -793,11 +795,13 @@ class LabSession:
             if not poles.same_as(self.shown_poles):
                 self.shown_poles = poles
                 with self.client.atomic():            # series, axes and data change together
-                    for handle, (data, options) in zip(self.pole_plots, pole_map.charts(poles)):
-                        handle.series, handle.axes, handle.data = options["series"], options["axes"], data
-                        handle.scales, handle.title = options["scales"], options["title"]
+                    self.mode_picker.draw(poles)
                     self.pole_table.content = pole_map.table_markdown(poles)
         return True
+
+    def _pick_mode(self) -> None:
+        with self.gui_lock, self.client.atomic():
+            self.mode_picker.pick(self.mode_picker.dropdown.value)
 
     def _readouts_markdown(self, result: Analysis) -> str:
         """The readouts table: the analysis's figures, then the exercise's figures of the scope window."""
