@@ -252,7 +252,9 @@ def view(exercise: Exercise, values: dict, poles: dict[str, np.ndarray]) -> Pole
     except (ValueError, ArithmeticError, KeyError, IndexError):             # incl. LinAlgError
         names, shares = {}, {}
     try:
-        names.update({k: v for k, v in exercise.mode_names(values, poles).items() if any(v)})
+        for set_name, given in exercise.mode_names(values, poles).items():   # a given name wins
+            derived = names.get(set_name) or [None] * len(given)
+            names[set_name] = [g if g is not None else d for g, d in zip(given, derived)]
     except (ValueError, ArithmeticError, KeyError, IndexError):
         pass
     try:
