@@ -449,7 +449,7 @@ def detail_markdown(mode: Mode | None) -> str:
     decay = f"{_duration(-1.0 / mode.pole.real)}" if mode.pole.real < 0 else "— (not decaying)"
     lines = [(f"**Mode #{mode.number}: {mode.label}** "
              f'(<span style="color:{category(mode.set_name).color}">●</span> {mode.set_name})'), "",
-             "| s [rad/s] | f_n [Hz] | ζ | time constant 1/|Re s| |", "|---|---:|---:|---:|",
+             "| s [rad/s] | f_n [Hz] | ζ | time constant τ = −1/Re s |", "|---|---:|---:|---:|",
              f"| {s} | {mode.natural_hz:.4g} | {mode.damping:.3f} | {decay} |"]
     shown = [(label, share) for label, share in mode.shares if share >= 0.01]
     if shown:
