@@ -248,7 +248,7 @@ def view(exercise: Exercise, values: dict, poles: dict[str, np.ndarray]) -> Pole
     """The pole view of an analysis with the exercise's mode names; the root locus (or the
     names) are left out if they cannot be computed here."""
     try:
-        names, shares = physical_names(exercise.mode_matrices(values), poles)
+        names, shares = _cached_physical_names(exercise, values, poles)
     except (ValueError, ArithmeticError, KeyError, IndexError):             # incl. LinAlgError
         names, shares = {}, {}
     try:
@@ -261,6 +261,29 @@ def view(exercise: Exercise, values: dict, poles: dict[str, np.ndarray]) -> Pole
         return PoleView(poles, locus(exercise, values), names, shares)
     except (ValueError, ArithmeticError, KeyError, NotImplementedError):
         return PoleView(poles, names=names, shares=shares)
+
+
+_names_cache: OrderedDict = OrderedDict()
+
+
+def _cached_physical_names(exercise: Exercise, values: dict, poles: dict) -> tuple[dict, dict]:
+    """``physical_names`` of the exercise's ``mode_matrices``, kept per setting (the analysis
+    thread redraws the same setting several times; an uploaded recording is never cached)."""
+    key = None
+    if values.get("data") is None:
+        key = (exercise.name, tuple(sorted((k, v) for k, v in values.items() if k not in NOT_IN_LOCUS)),
+               tuple((name, np.asarray(p, dtype=complex).tobytes()) for name, p in poles.items()))
+        with _locus_lock:
+            if key in _names_cache:
+                names, shares = _names_cache[key]
+                return {k: list(v) for k, v in names.items()}, dict(shares)
+    names, shares = physical_names(exercise.mode_matrices(values), poles)
+    if key is not None:
+        with _locus_lock:
+            _names_cache[key] = ({k: list(v) for k, v in names.items()}, dict(shares))
+            while len(_names_cache) > LOCUS_CACHE:
+                _names_cache.popitem(last=False)
+    return names, shares
 
 
 def physical_names(matrices: dict, poles: dict[str, np.ndarray], tolerance: float = 1e-5) -> tuple[dict, dict]:

@@ -509,7 +509,7 @@ def name_modes(A, states, sample_time_s: float | None = None, mixed: float = 0.3
         if len(pooled) > 1 and pooled[1][0] >= mixed:
             name = f"{name} + {pooled[1][1]}"
         shares = tuple(sorted(((labels[i], float(p[i, k])) for i in range(len(labels))), key=lambda s: -s[1]))
-        with np.errstate(divide="ignore"):             # z = 0 (a pure delay) has no s: -inf
+        with np.errstate(divide="ignore", invalid="ignore"):   # z = 0 (a pure delay) has no s
             s = complex(lam) if sample_time_s is None else complex(z_to_s(lam, sample_time_s))
         out.append(NamedMode(s, name, shares))
     return out
