@@ -30,7 +30,7 @@ SPACES = " \u00a0\u2009\u202f"    # spaces, also the no-break and thin ones of p
 #: entry's empty label takes no room. Sliders without an entry are left alone.
 STYLE = """<style>
 div:has(> div > .mantine-Flex-root > div > p > label:empty) {
-  display: grid; grid-template-columns: minmax(0, 1fr) 4.6rem; align-items: center; }
+  display: grid; grid-template-columns: minmax(0, 1fr) 5.25rem; align-items: center; }
 div:has(> div > .mantine-Flex-root > div > p > label:empty) > * { grid-column: 1 / -1; }
 div:has(> div > .mantine-Flex-root > div > p > label:empty) > div:has(+ div > .mantine-Flex-root > div > p > label:empty) {
   grid-column: 1; }

@@ -479,6 +479,7 @@ class LabSession:
         self.inputs: dict[str, viser.GuiInputHandle] = {}
         self.refused: dict[str, bool] = {}            # boxes being put back to the value in use (_refuse)
         self.entries: dict[str, viser.GuiInputHandle] = {}   # typed-value boxes (app/entry.py)
+        self.entry_notes: dict[str, viser.GuiMarkdownHandle] = {}   # a refused entry's line, under its box
         groups: dict[str, list[Parameter]] = {}
         for parameter in self.exercise.parameters:
             groups.setdefault(parameter.group, []).append(parameter)
@@ -600,7 +601,19 @@ class LabSession:
             self.post(("typed", parameter.name), lambda: self._on_typed(parameter, box))
         self.entries[parameter.name] = entry.add_box(self.client.gui, parameter, self.values[parameter.name],
                                                      label, still, hint)
+        self.entry_notes[parameter.name] = self.client.gui.add_markdown("", visible=False)
         return self.entries[parameter.name]
+
+    def _tell(self, name: str | None, markdown: str) -> None:
+        """One line for the student: under the box of parameter ``name`` where it has one (where
+        the student looks), else at the foot of the controls; "" clears it."""
+        for other, note in self.entry_notes.items():
+            if other != name and note.visible:
+                note.visible = False
+        note = self.entry_notes.get(name)
+        if note is not None and markdown:
+            note.content, note.visible = markdown, True
+        self.error.content = "" if note is not None else markdown
 
     def _follow_ranges(self) -> None:
         """Sliders whose range depends on other values (e.g. the loaded recording's length) span that
@@ -662,7 +675,7 @@ class LabSession:
         entry.show(self.entries.get(parameter.name), value)
         if self.refused.pop(parameter.name, False) and np.isclose(value, self.values[parameter.name], rtol=1e-2):
             return                                    # the box put back by _refuse: its message stays
-        self.error.content = ""
+        self._tell(None, "")
         self.scene_quiet_until = time.perf_counter() + SCENE_QUIET_AFTER_INPUT_S
         with self.lock:
             self.values[parameter.name] = value
@@ -689,7 +702,7 @@ class LabSession:
         one line names the parameter, the entry and the range, and the box and slider show the
         value in use again (issue 11, defect 10)."""
         in_use = self.values[parameter.name]
-        self.error.content = f"⚠️ {escaped(message)}"
+        self._tell(parameter.name, f"⚠️ {escaped(message)}")
         box = self.entries.get(parameter.name)
         entry.show(box, in_use)
         handle = self.inputs.get(parameter.name)
