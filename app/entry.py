@@ -35,6 +35,7 @@ div:has(> div > .mantine-Flex-root > div > p > label:empty) > * { grid-column: 1
 div:has(> div > .mantine-Flex-root > div > p > label:empty) > div:has(+ div > .mantine-Flex-root > div > p > label:empty) {
   grid-column: 1; }
 div:has(> .mantine-Flex-root > div > p > label:empty) { grid-column: 2 !important; padding-left: 0 !important; }
+div:has(> .mantine-Flex-root > div > p > label:empty) input { padding: 0 0.3em !important; letter-spacing: -0.5px; }
 div:has(> .mantine-Flex-root > div > p > label:empty) > .mantine-Flex-root > div:has(> p > label:empty) {
   display: none; }
 div:has(+ div > .mantine-Flex-root > div > p > label:empty) .mantine-Slider-root + .mantine-NumberInput-root {
@@ -101,8 +102,12 @@ def refusal(parameter: Parameter, text: str, reason: str, in_use) -> str:
 
 
 def shown_value(value) -> str:
-    """A value as its box shows it: up to ten significant digits, no float noise."""
-    return f"{float(value):.10g}" if not isinstance(value, int) else str(value)
+    """A value as its box shows it: as typed where that fits the box (up to 9 characters, no float
+    noise), else to five significant digits ("1.3521e-11")."""
+    if isinstance(value, int):
+        return str(value)
+    text = f"{float(value):.10g}"
+    return text if len(text) <= 9 else f"{float(value):.5g}"
 
 
 class Quiet:

@@ -672,9 +672,9 @@ class LabSession:
             self._refuse(parameter, entry.refusal(parameter, f"{value}", "is out of range",
                                                   self.values[parameter.name]))
             return
-        entry.show(self.entries.get(parameter.name), value)
         if self.refused.pop(parameter.name, False) and np.isclose(value, self.values[parameter.name], rtol=1e-2):
             return                                    # the box put back by _refuse: its message stays
+        entry.show(self.entries.get(parameter.name), value)
         self._tell(None, "")
         self.scene_quiet_until = time.perf_counter() + SCENE_QUIET_AFTER_INPUT_S
         with self.lock:
@@ -707,7 +707,7 @@ class LabSession:
         entry.show(box, in_use)
         handle = self.inputs.get(parameter.name)
         if handle is not None and handle is not box and not parameter.choices:
-            shown = round(float(np.log10(in_use)), 3) if parameter.log else in_use
+            shown = float(np.log10(in_use)) if parameter.log else in_use
             if handle.value != shown:
                 self.refused[parameter.name] = True
                 handle.value = shown

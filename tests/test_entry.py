@@ -57,6 +57,7 @@ def test_shown_values_carry_no_float_noise():
     assert entry.shown_value(10 ** __import__("math").log10(0.0123)) == "0.0123"
     assert entry.shown_value(1.3320000000000001) == "1.332"
     assert entry.shown_value(3) == "3"
+    assert entry.shown_value(1.352082207e-11) == "1.3521e-11"       # fits the box
 
 
 def test_the_box_is_read_once_typing_stopped(monkeypatch):
