@@ -88,6 +88,8 @@ def read(parameter: Parameter, text: str) -> float | int:
 
 
 def valid_range(parameter: Parameter) -> str:
+    if parameter.choices:
+        return parameter.valid_range()
     unit = f" {parameter.unit}" if parameter.unit else ""
     return f"{parameter.minimum:.10g} … {parameter.maximum:.10g}{unit}"
 
@@ -104,7 +106,7 @@ def refusal(parameter: Parameter, text: str, reason: str, in_use) -> str:
 def shown_value(value) -> str:
     """A value as its box shows it: as typed where that fits the box (up to 9 characters, no float
     noise), else to five significant digits ("1.3521e-11")."""
-    if isinstance(value, int):
+    if isinstance(value, (int, str)):
         return str(value)
     text = f"{float(value):.10g}"
     return text if len(text) <= 9 else f"{float(value):.5g}"

@@ -58,7 +58,7 @@ LOG_SCALE = {"distr": 3, "log": 10}   # uPlot's logarithmic scale
 LOG_DECADES = 4                   # a logarithmic plot shows at most this many decades
 #: What the boxes beside the sliders take (app/entry.py; issue 11, defect 10)
 NUMBER_BOX_HINT = ("*Type a value in the box beside a slider: 0.5 or 0,5 or 5e-1. A value outside the slider's "
-                   "range (under it) is refused with a note here, and the box shows the value in use.*")
+                   "range (under it) is refused with a note under the box, which shows the value in use again.*")
 PANEL_TABS = (("Scope", viser.Icon.WAVE_SINE), ("Pole map", viser.Icon.CHART_DOTS),
               ("Analysis", viser.Icon.CHART_LINE), ("Worksheet", viser.Icon.NOTEBOOK))
 AUTOSAVE_AFTER_S = 1.0            # a tab's autosave is written this long after its last change

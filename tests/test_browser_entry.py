@@ -90,5 +90,18 @@ def test_typed_values_are_taken_or_refused_with_one_line(open_tab):
     assert _wait(lambda: any("Random seed: “x” is not a number" in w for w in _warnings(page))), _warnings(page)
     assert _wait(lambda: seed.input_value() == "0"), seed.input_value()
 
+    page.get_by_text("Kalman filter", exact=True).first.click()      # a logarithmic slider's box
+    q_box = tab.entry_box("Filter Q_ii [A²]")
+    q_slider = page.get_by_text("Filter Q_ii [A²]", exact=True).locator("xpath=../../../..").get_by_role("slider")
+    q_box.fill("2,5e-3")
+    assert _wait(lambda: q_box.input_value() == "0.0025"), q_box.input_value()
+    assert _wait(lambda: abs(float(q_slider.get_attribute("aria-valuenow")) - (-2.60206)) < 1e-4)
+    q_box.fill("5")
+    assert _wait(lambda: any("Filter Q_ii: “5” is out of range; valid: 1e-10 … 1 A² (0.5 or 0,5). The lab keeps "
+                             "0.0025 A²." in w for w in _warnings(page))), _warnings(page)
+    assert _wait(lambda: q_box.input_value() == "0.0025"), q_box.input_value()
+    time.sleep(1.0)
+    assert q_box.input_value() == "0.0025" and len(_warnings(page)) == 1, (q_box.input_value(), _warnings(page))
+
     assert not _warnings(other.page) and other.entry_box(NOISE).input_value() == "1.3323"
     assert not tab.errors and not other.errors, (tab.errors, other.errors)

@@ -51,6 +51,8 @@ def test_the_refusal_is_one_line_naming_parameter_entry_range_and_value_in_use()
     assert entry.refusal(NOISE, "", "is empty", 2.0).startswith("Position sensor noise σ: an empty entry changes")
     assert "\n" not in entry.refusal(NOISE, "a\nb" * 40, "is not a number", 1.0)
     assert entry.refusal(SEED, "x", "is not a number", 7).endswith("The lab keeps 7.")
+    choice = Parameter("feedback", "Feedback source", "", "measured", choices=("measured", "estimated"))
+    assert "valid: one of measured, estimated" in entry.refusal(choice, "x", "is not valid", "measured")
 
 
 def test_shown_values_carry_no_float_noise():
