@@ -20,7 +20,7 @@ from lab_modules.parameters import Parameter, ParameterError
 
 #: The student has stopped typing once the box is this still [s]; an emptied box waits longer,
 #: it is usually emptied to type a new value.
-QUIET_S = 0.8
+QUIET_S = 1.0
 QUIET_EMPTY_S = 2.5
 MINUS_SIGNS = "−–‐"               # Unicode minus, en dash and hyphen typed or pasted for "-"
 SPACES = " \u00a0\u2009\u202f"    # spaces, also the no-break and thin ones of pasted "1 000"

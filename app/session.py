@@ -659,10 +659,10 @@ class LabSession:
             return
         handle = self.inputs.get(parameter.name, box)
         shown = float(np.log10(value)) if parameter.log else value
-        if handle is box or handle.value == shown:
-            self._on_input(parameter, shown)
-        else:
-            handle.value = shown                      # the slider follows; its update sets the value
+        self._on_input(parameter, shown)
+        if handle is not box and handle.value != shown:
+            self.refused[parameter.name] = True       # the slider follows; its echo changes nothing
+            handle.value = shown
 
     def _on_input(self, parameter: Parameter, shown) -> None:
         value = 10 ** float(shown) if parameter.log else shown

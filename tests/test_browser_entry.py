@@ -43,11 +43,13 @@ def test_typed_values_are_taken_or_refused_with_one_line(open_tab):
     assert box.bounding_box()["width"] >= 66, box.bounding_box()          # room for "0.0012345"
     assert abs(box.bounding_box()["y"] - slider.bounding_box()["y"]) < 20  # beside the slider
 
-    def enter(text: str) -> None:
+    def enter(text: str, at_once: bool = False) -> None:
         box.click()
         box.press("Control+a")
         box.press("Backspace")
-        if text:
+        if at_once:                                  # one message: a busy server never sees "9" of "99"
+            box.fill(text)
+        elif text:
             box.press_sequentially(text, delay=30)
 
     def refused(typed: str, reason: str, kept: str) -> None:
@@ -78,7 +80,7 @@ def test_typed_values_are_taken_or_refused_with_one_line(open_tab):
     time.sleep(2.0)
     taken = readout.inner_text()
 
-    enter("99")
+    enter("99", at_once=True)
     refused("“99”", "is out of range", "1.5")
     time.sleep(2.0)
     assert readout.inner_text() == taken             # the lab kept 1.5 µm (never 9, never 10)
