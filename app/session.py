@@ -891,8 +891,11 @@ class LabSession:
                 return False
             carry, last, next_scene, next_readouts = state
             try:
-                state[0], state[2], state[3] = self._frame(generation, now, now - last, carry,
-                                                           next_scene, next_readouts)
+                # one wake-up of the event loop for the frame's messages (3D view, scope, readouts),
+                # not one per message: each wake-up is a system call
+                with self.client.atomic():
+                    state[0], state[2], state[3] = self._frame(generation, now, now - last, carry,
+                                                               next_scene, next_readouts)
             except Exception as error:  # noqa: BLE001 - reported; the next frame goes on
                 self._problem("simulation", error)
             state[1] = now
@@ -927,9 +930,11 @@ class LabSession:
             if not self.running:
                 return 0.0, next_scene, next_readouts
             steps, carry = int(carry), carry - int(carry)
-            started = time.thread_time()
+            timed = self.speed_meter.timed()          # a CPU-clock read is a system call: not every frame
+            started = time.thread_time() if timed else 0.0
             trace = self.simulation.advance(steps)
-            self.speed_meter.add(steps * self.simulation.sample_time_s, time.thread_time() - started, elapsed)
+            self.speed_meter.add(steps * self.simulation.sample_time_s,
+                                 time.thread_time() - started if timed else None, elapsed)
             window = self._window_rows()
             self.buffer = scope.append(self.buffer, trace, window)
             message = self.simulation.status_message()
