@@ -614,7 +614,7 @@ class LabSession:
             series += [viser.uplot.Series(label="+3σ", stroke="rgba(214,39,40,0.35)", width=1),
                        viser.uplot.Series(label="−3σ", stroke="rgba(214,39,40,0.35)", width=1)]
         series += [viser.uplot.Series(label=s.label, stroke=s.color, width=1.5) for s in chart.series]
-        series += [scope.ANCHOR_SERIES]               # holds the y range still without rebuilding the chart
+        series += [scope.ANCHOR_SERIES, scope.LAYOUT_SERIES]   # y range held still; axes laid out each frame
         bands = (viser.uplot.Band(series=(1, 2), fill="rgba(214,39,40,0.12)"),) if chart.band else None
         empty = (np.array([-self.window_ms, 0.0]),) + tuple(np.zeros(2) for _ in series[1:])
         return self.client.gui.add_uplot(
@@ -949,6 +949,7 @@ class LabSession:
         # the time axis runs from -window to 0 ms: float32 while that resolves a sample
         float32_time = _float32_resolves(np.array((self.window_ms,)), sample_time * 1e3)
         now = time.perf_counter()
+        self.frames_drawn = getattr(self, "frames_drawn", 0) + 1
         with self.client.atomic():                    # one wake-up of the event loop per frame, not per chart
             for plan, handle, y_range in zip(self.chart_plans, self.charts, self.y_ranges):
                 if self.closed:
@@ -957,7 +958,7 @@ class LabSession:
                                                               SCOPE_BUCKETS, ROUGHNESS_ROWS)
                 y_range.follow(low, high, now)
                 ys[-1, 0::2], ys[-1, 1::2] = y_range.shown() or (0.0, 0.0)   # the anchor series (scope.anchor)
-                data = (t32 if float32_time else t_ms, *ys)
+                data = (t32 if float32_time else t_ms, *ys, scope.layout(self.frames_drawn, len(t_ms)))
                 # Straight to the wire: the handle's ``data`` setter would cast every column to float64.
                 handle._impl.props.data = data
                 handle._queue_update("data", data)
