@@ -26,6 +26,8 @@ import viser
 SHRINK_AFTER_S = 3.0          # a range three times too large for this long shrinks
 HEADROOM = 1.2                # the range covers the traces with this factor
 PADDING = (12, 16, 0, 4)      # top, right, bottom, left [px]: the top tick label stays inside the chart
+#: log-frequency axes end on a decade whose label ("10,000") is centred on the right edge: room for its half
+LOG_X_PADDING = (12, 30, 0, 4)
 Y_AXIS_SIZE = 56              # px for the y tick labels (five significant characters)
 X_AXIS_SIZE = 50              # px for the x tick labels (uPlot's default, fixed: no size from the labels)
 

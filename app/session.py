@@ -1040,7 +1040,8 @@ def _plot_chart(plot: Plot) -> tuple[tuple, dict]:
         viser.uplot.Series(label=label, stroke=color, width=1.5, points=viser.uplot.Series_Points(show=False))
         for label, _, color in plot.series)
     return (x, *ys), {
-        "series": series, "title": plot.title, "legend": viser.uplot.Legend(live=False), "padding": scope.PADDING,
+        "series": series, "title": plot.title, "legend": viser.uplot.Legend(live=False),
+        "padding": scope.LOG_X_PADDING if plot.log_x else scope.PADDING,
         "axes": (viser.uplot.Axis(label=plot.x_label), viser.uplot.Axis(label=plot.y_label)),
         "scales": {"x": viser.uplot.Scale(time=False, **(LOG_SCALE if plot.log_x else {})),
                    "y": viser.uplot.Scale(auto=False, **(LOG_SCALE | _log_span(*ys) if plot.log_y else _span(*ys)))}}

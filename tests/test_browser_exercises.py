@@ -34,8 +34,17 @@ SCOPES_JS = """() => Object.values((window.__viserTestpoints || {}).uplots || {}
 CHARTS_JS = """() => Object.values((window.__viserTestpoints || {}).uplots || {}).map(v => v.chart)
     .filter(c => c.root.offsetParent !== null).map(c => ({
     title: (c.root.querySelector('.u-title') || {}).innerText || '', width: c.root.getBoundingClientRect().width,
-    yticks: (c.axes[1]._values || []).filter(t => t !== null && String(t).trim() !== '').length,
+    yticks: !(c.axes[1]._found || [0, 0])[1] ? 0 :             // no space laid out: no ticks drawn
+        (c.axes[1]._values || []).filter(t => t !== null && String(t).trim() !== '').length,
     placeholder: [...c.root.querySelectorAll('.u-legend .u-value')].some(v => v.innerText.trim() === '--'),
+    xlabelFits: (() => {        // the last x tick label (drawn centred on its tick) ends inside the canvas
+        const a = c.axes[0], values = a._values || [], splits = a._splits || [];
+        let i = values.length - 1;
+        while (i >= 0 && (values[i] === null || String(values[i]).trim() === '')) i--;
+        if (i < 0 || !(a._found || [0, 0])[1]) return true;
+        c.ctx.save(); c.ctx.font = a.font ? a.font[0] : c.ctx.font;
+        const w = c.ctx.measureText(String(values[i])).width; c.ctx.restore();
+        return c.valToPos(splits[i], 'x', true) + w / 2 <= c.ctx.canvas.width; })(),
     ylabel: c.axes[1].label || '', ylabelFits: (() => {       // drawn rotated on the canvas: its length
         const a = c.axes[1]; if (!a.label) return true;          // must fit the canvas height
         c.ctx.save(); c.ctx.font = a.labelFont ? a.labelFont[0] : c.ctx.font;
@@ -72,7 +81,7 @@ def _readable_charts(page, name: str) -> None:
     tick labels (uPlot draws them on its canvas; its axis state ``axes[1]._values`` holds them:
     empty there means a blank axis, as a screenshot shows) and a legend without '--'
     placeholders, the panel's tabs in one row."""
-    deadline = time.time() + 6                        # a scope lays its axes out again within ~3 s
+    deadline = time.time() + 6                        # a heavy exercise's analysis charts come late
     charts = page.evaluate(CHARTS_JS)
     while (not charts or min(c["yticks"] for c in charts) < 3) and time.time() < deadline:
         time.sleep(0.25)
@@ -82,6 +91,7 @@ def _readable_charts(page, name: str) -> None:
         assert chart["width"] > 500, (name, "squeezed chart panel", chart)
         assert chart["yticks"] >= 3, (name, "fewer than three y tick labels", chart)
         assert chart["ylabelFits"], (name, "y label longer than the chart", chart)
+        assert chart["xlabelFits"], (name, "the last x tick label is cut at the right edge", chart)
         assert not chart["placeholder"], (name, "legend shows '--'", chart)
     assert page.evaluate(TAB_ROWS_JS) == 1, (name, "the panel's tabs wrap")
 
