@@ -103,10 +103,14 @@ class LivePlots:
 
 
 class SpeedMeter:
-    """How fast the simulation runs: simulated time per wall-clock second (what the tab
-    shows: the time scale, unless the server falls behind) and per second spent computing
-    it (how fast it could run: the simulation thread's CPU time, so waits for the GIL and
-    for other threads do not count)."""
+    """Whether the simulation keeps up with the time scale a student asked for, and how much
+    room is left: simulated time per wall-clock second (× real time) and the share of one CPU
+    core spent computing it (the simulation thread's CPU time per wall-clock second, so waits
+    for the GIL and for other threads do not count).  The share is what headroom means here: a
+    speed "if computing were all" (simulated time per CPU second) read as another speed and
+    swung with the frame's chunk size (kalman_noise at 0.01×: "1.9×" of tiny chunks)."""
+
+    KEEPS_UP = 0.95               # shown/asked at or above this: keeping up (frames are 40 ms apart)
 
     def __init__(self) -> None:
         self.simulated_s = self.computing_s = self.wall_s = 0.0
@@ -116,12 +120,17 @@ class SpeedMeter:
         self.computing_s += computing_s
         self.wall_s += wall_s
 
-    def text(self) -> str:
-        """One line over the time since the last call ('' before anything ran); starts afresh."""
+    def text(self, asked: float = 1.0) -> str:
+        """One line over the time since the last call ('' before anything ran); starts afresh.
+        ``asked``: the time scale set [× real time]."""
         if self.wall_s <= 0 or self.simulated_s <= 0:
             return ""
         shown = self.simulated_s / self.wall_s
-        computing = self.simulated_s / self.computing_s if self.computing_s > 0 else float("inf")
+        busy = 100.0 * self.computing_s / self.wall_s
         self.simulated_s = self.computing_s = self.wall_s = 0.0
-        return (f"Simulation speed: **{shown:.3g}× real time** (computing alone: {computing:.3g}× real time, "
-                "one core)")
+        if shown >= self.KEEPS_UP * asked:
+            return (f"Simulation: **{shown:.3g}× real time**, keeping up with the time scale ({asked:.3g}×); "
+                    f"computing uses {busy:.0f} % of one CPU core ({max(100.0 - busy, 0.0):.0f} % headroom)")
+        return (f"Simulation: **{shown:.3g}× real time**, **falling behind** the time scale ({asked:.3g}×); "
+                f"computing uses {busy:.0f} % of one CPU core" + (" (no headroom)" if busy >= 90 else
+                                                                  " (the server is busy with other work)"))

@@ -896,7 +896,7 @@ class LabSession:
             self.live.draw(self.simulation, now, getattr(self, "drawn_until", None))
             if now >= next_readouts:
                 self._refresh_live_readouts()
-                self.speed.content = self.speed_meter.text()
+                self.speed.content = self.speed_meter.text(self.values.get("time_scale", 1.0))
                 next_readouts = now + LIVE_READOUT_PERIOD_S
             stop = getattr(self, "stop_shown", None)
             if stop is not None:
@@ -1044,17 +1044,18 @@ def _plot_chart(plot: Plot) -> tuple[tuple, dict]:
         "padding": scope.LOG_X_PADDING if plot.log_x else scope.PADDING,
         "axes": (viser.uplot.Axis(label=plot.x_label), viser.uplot.Axis(label=plot.y_label)),
         "scales": {"x": viser.uplot.Scale(time=False, **(LOG_SCALE if plot.log_x else {})),
-                   "y": viser.uplot.Scale(auto=False, **(LOG_SCALE | _log_span(*ys) if plot.log_y else _span(*ys)))}}
+                   "y": viser.uplot.Scale(auto=False, **(LOG_SCALE | _log_span(*ys, decades=plot.log_decades or LOG_DECADES)
+                                                       if plot.log_y else _span(*ys)))}}
 
 
-def _log_span(*arrays: np.ndarray) -> dict[str, float]:
+def _log_span(*arrays: np.ndarray, decades: int = LOG_DECADES) -> dict[str, float]:
     """A logarithmic plot range over the positive finite values of ``arrays`` in whole decades,
-    at most ``LOG_DECADES`` of them below the largest value."""
+    at most ``decades`` of them below the largest value."""
     positive = np.concatenate([a[np.isfinite(a) & (a > 0)] for a in arrays]) if arrays else np.zeros(0)
     if positive.size == 0:
         return {"min": 0.1, "max": 1.0}
     top = np.ceil(np.log10(positive.max()))
-    return {"min": 10.0 ** max(np.floor(np.log10(positive.min())), top - LOG_DECADES), "max": 10.0**top}
+    return {"min": 10.0 ** max(np.floor(np.log10(positive.min())), top - decades), "max": 10.0**top}
 
 
 def _span(*arrays: np.ndarray) -> dict[str, float]:

@@ -47,7 +47,7 @@ def test_ripple_zoom_speed_readout_and_monte_carlo_button(open_tab, lab_server):
         time.sleep(0.3)
         sums.add(page.evaluate(RIPPLE_JS)["sum"])
     assert len(sums) > 1, "the ripple zoom stands still"
-    speed = page.get_by_text("Simulation speed:", exact=False).first
+    speed = page.get_by_text("Simulation:", exact=False).first
     speed.wait_for(timeout=5000)
     assert re.search(r"0\.2\d*× real time", speed.inner_text()), speed.inner_text()
 

@@ -201,6 +201,12 @@ def test_speed_meter():
     assert meter.text() == ""
     meter.add(0.01, 0.0005, 0.04)
     meter.add(0.01, 0.0005, 0.04)
-    text = meter.text()
-    assert "0.25× real time" in text and "20× real time" in text
+    text = meter.text(0.25)                                         # slow motion, asked for
+    assert "**0.25× real time**, keeping up with the time scale (0.25×)" in text
+    assert "computing uses 1 % of one CPU core (99 % headroom)" in text
+    assert "computing alone" not in text and "20×" not in text      # no second, confusing speed
     assert meter.text() == ""                                       # starts afresh
+    meter.add(0.03, 0.039, 0.04)                                    # asked 1×, got 0.75×: the CPU is the limit
+    text = meter.text(1.0)
+    assert "**0.75× real time**, **falling behind** the time scale (1×)" in text and "98 %" in text
+    assert "no headroom" in text
