@@ -142,6 +142,33 @@ def chart_options(x_label: str, y_label: str) -> dict:
             "padding": PADDING}
 
 
+_SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
+
+
+def decade_label(exponent: int) -> str:
+    """10^exponent as a tick label: plain from 0.001 to 1000, else 10⁻⁴, 10⁴ ... (uPlot's own
+    numbers keep three decimals, so every decade below 0.001 read "0")."""
+    if -3 <= exponent <= 3:
+        return f"{10.0 ** exponent:.{max(-exponent, 0)}f}"
+    return "10" + str(exponent).translate(_SUPERSCRIPT)
+
+
+def log_axis(low: float, high: float) -> dict:
+    """Static ``splits`` and ``values`` of a logarithmic axis over [low, high] (whole decades):
+    a labelled tick at every decade (every second one beyond eight decades), unlabelled ticks at
+    2 … 9 × 10^k while there are at most four decades."""
+    first, last = round(np.log10(low)), round(np.log10(high))
+    every = 1 if last - first <= 8 else 2
+    splits, values = [], []
+    for exponent in range(first, last + 1):
+        splits.append(10.0**exponent)
+        values.append(decade_label(exponent) if (exponent - last) % every == 0 else "")
+        if last - first <= 4 and exponent < last:
+            splits += [m * 10.0**exponent for m in range(2, 10)]
+            values += [""] * 8
+    return {"splits": splits, "values": values}
+
+
 def append(buffer: np.ndarray, trace: np.ndarray, rows: int) -> np.ndarray:
     """The scope buffer after a frame's new samples ``trace``, at most ``rows`` long.  A trace that
     starts at or before the buffer's newest time is a new run (a Reset, or a slider move the

@@ -765,7 +765,9 @@ class LabSession:
                     self.plots.append(self.client.gui.add_uplot(data, **options, aspect=2.0))
                 self.plot_shapes.append(_plot_shape(plot))
             elif self.plot_shapes[k] == _plot_shape(plot):
-                self.plots[k].data, self.plots[k].scales = data, options["scales"]
+                with self.client.atomic():            # a log axis's ticks follow its range
+                    self.plots[k].data, self.plots[k].scales = data, options["scales"]
+                    self.plots[k].axes = options["axes"]
             else:
                 with self.client.atomic():            # series, axes and data change together
                     handle = self.plots[k]
@@ -1039,13 +1041,15 @@ def _plot_chart(plot: Plot) -> tuple[tuple, dict]:
         if plot.points else
         viser.uplot.Series(label=label, stroke=color, width=1.5, points=viser.uplot.Series_Points(show=False))
         for label, _, color in plot.series)
+    y_span = _log_span(*ys, decades=plot.log_decades or LOG_DECADES) if plot.log_y else _span(*ys)
     return (x, *ys), {
         "series": series, "title": plot.title, "legend": viser.uplot.Legend(live=False),
         "padding": scope.LOG_X_PADDING if plot.log_x else scope.PADDING,
-        "axes": (viser.uplot.Axis(label=plot.x_label), viser.uplot.Axis(label=plot.y_label)),
+        "axes": (viser.uplot.Axis(label=plot.x_label),
+                 viser.uplot.Axis(label=plot.y_label, **(scope.log_axis(y_span["min"], y_span["max"])
+                                                         if plot.log_y else {}))),
         "scales": {"x": viser.uplot.Scale(time=False, **(LOG_SCALE if plot.log_x else {})),
-                   "y": viser.uplot.Scale(auto=False, **(LOG_SCALE | _log_span(*ys, decades=plot.log_decades or LOG_DECADES)
-                                                       if plot.log_y else _span(*ys)))}}
+                   "y": viser.uplot.Scale(auto=False, **(LOG_SCALE if plot.log_y else {}), **y_span)}}
 
 
 def _log_span(*arrays: np.ndarray, decades: int = LOG_DECADES) -> dict[str, float]:

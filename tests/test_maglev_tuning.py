@@ -195,3 +195,8 @@ def test_small_mean_nis_stays_in_view(overrides):
     y = _plot_chart(plot)[1]["scales"]["y"]
     assert y["distr"] == 3                                           # logarithmic
     assert y["min"] <= np.nanmin(means) and y["max"] >= plot.series[2][1][0]
+    # every decade labelled legibly: uPlot's own numbers (three decimals) read "0" below 0.001
+    axis = _plot_chart(plot)[1]["axes"][1]
+    labels = dict(zip(axis["splits"], axis["values"]))
+    assert labels[1e-4] == "10⁻⁴" and labels[1e-3] == "0.001" and labels[1.0] == "1"
+    assert "0" not in axis["values"] and all(labels[10.0**k] for k in range(-4, 1))

@@ -76,8 +76,7 @@ def test_iso_zones_and_the_analysis_tab_view():
     omega = 2 * np.pi * sens.x
     direct = -20 * np.log10(np.abs(1 + np.squeeze(control.frequency_response(loop, omega).complex)))
     assert np.allclose(curves["|S| PID"], direct, atol=1e-9)
-    peak_db = dict(((label, unit), value) for label, value, unit in readouts)[
-        next((label, "dB") for label, _, unit in readouts if label.startswith("PID: |S|max") and unit == "dB")]
+    peak_db = next(value for label, value, unit in readouts if label.startswith("PID: |S|max") and unit == "dB")
     assert np.nanmax(curves["|S| PID"]) == pytest.approx(peak_db, abs=0.01)
     limits = sorted(float(y[0]) for label, y, _ in sens.series if label.startswith("zone limit"))
     assert limits == pytest.approx([9.542, 12.041, 13.979], abs=1e-3)
