@@ -128,9 +128,9 @@ class SpeedMeter:
         shown = self.simulated_s / self.wall_s
         busy = 100.0 * self.computing_s / self.wall_s
         self.simulated_s = self.computing_s = self.wall_s = 0.0
+        uses = f"computing uses {busy:.0f} % of one CPU core" if busy >= 1 else "computing uses under 1 % of one CPU core"
         if shown >= self.KEEPS_UP * asked:
             return (f"Simulation: **{shown:.3g}× real time**, keeping up with the time scale ({asked:.3g}×); "
-                    f"computing uses {busy:.0f} % of one CPU core ({max(100.0 - busy, 0.0):.0f} % headroom)")
+                    f"{uses} ({max(100.0 - busy, 0.0):.0f} % headroom)")
         return (f"Simulation: **{shown:.3g}× real time**, **falling behind** the time scale ({asked:.3g}×); "
-                f"computing uses {busy:.0f} % of one CPU core" + (" (no headroom)" if busy >= 90 else
-                                                                  " (the server is busy with other work)"))
+                + uses + (" (no headroom)" if busy >= 90 else " (the server is busy with other work)"))
