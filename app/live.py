@@ -105,20 +105,35 @@ class LivePlots:
 class SpeedMeter:
     """Whether the simulation keeps up with the time scale a student asked for, and how much
     room is left: simulated time per wall-clock second (× real time) and the share of one CPU
-    core spent computing it (the simulation thread's CPU time per wall-clock second, so waits
-    for the GIL and for other threads do not count).  The share is what headroom means here: a
-    speed "if computing were all" (simulated time per CPU second) read as another speed and
-    swung with the frame's chunk size (kalman_noise at 0.01×: "1.9×" of tiny chunks)."""
+    core spent computing it (the simulation thread's CPU time per simulated second × simulated
+    time per wall-clock second; waits for the GIL and for other threads do not count).  The
+    share is what headroom means here: a speed "if computing were all" (simulated time per CPU
+    second) read as another speed and swung with the frame's chunk size (kalman_noise at 0.01×:
+    "1.9×" of tiny chunks).
 
+    The CPU time is read on one frame in ``TIMED_EVERY`` (``timed()``): reading a thread's
+    CPU clock is a system call, not a cheap clock read, and one call per tab and frame
+    was a measurable part of a tab's cost; the share over a second is the same."""
+
+    TIMED_EVERY = 8
     KEEPS_UP = 0.95               # shown/asked at or above this: keeping up (frames are 40 ms apart)
 
     def __init__(self) -> None:
-        self.simulated_s = self.computing_s = self.wall_s = 0.0
+        self.simulated_s = self.computing_s = self.wall_s = self.timed_simulated_s = 0.0
+        self.frames = 0
 
-    def add(self, simulated_s: float, computing_s: float, wall_s: float) -> None:
+    def timed(self) -> bool:
+        """Whether to read the CPU time of this frame's simulation (one frame in ``TIMED_EVERY``)."""
+        self.frames += 1
+        return self.frames % self.TIMED_EVERY == 1 or self.TIMED_EVERY == 1
+
+    def add(self, simulated_s: float, computing_s: float | None, wall_s: float) -> None:
+        """One frame: simulated time, its CPU time (None: not timed), wall-clock time [s]."""
         self.simulated_s += simulated_s
-        self.computing_s += computing_s
         self.wall_s += wall_s
+        if computing_s is not None:
+            self.computing_s += computing_s
+            self.timed_simulated_s += simulated_s
 
     def text(self, asked: float = 1.0) -> str:
         """One line over the time since the last call ('' before anything ran); starts afresh.
@@ -126,8 +141,9 @@ class SpeedMeter:
         if self.wall_s <= 0 or self.simulated_s <= 0:
             return ""
         shown = self.simulated_s / self.wall_s
-        busy = 100.0 * self.computing_s / self.wall_s
-        self.simulated_s = self.computing_s = self.wall_s = 0.0
+        cpu_per_simulated = self.computing_s / self.timed_simulated_s if self.timed_simulated_s > 0 else 0.0
+        busy = 100.0 * cpu_per_simulated * shown
+        self.simulated_s = self.computing_s = self.wall_s = self.timed_simulated_s = 0.0
         uses = f"computing uses {busy:.0f} % of one CPU core" if busy >= 1 else "computing uses under 1 % of one CPU core"
         if shown >= self.KEEPS_UP * asked:
             return (f"Simulation: **{shown:.3g}× real time**, keeping up with the time scale ({asked:.3g}×); "

@@ -65,6 +65,7 @@ RULES = (
     (r"open-loop|open loop|plant|coil", "plant"),
     (r"loop", "closed loop"),
 )
+MARK_COLOR, MARK_SIZE = "#ff7f0e", 24.0    # the ring around the mode chosen in "Show mode"
 #: Marker (size, hollow) of the 1st, 2nd, 3rd ... set of one category in a map
 MARKERS = ((9.0, False), (10.0, True), (6.0, False), (13.0, True))
 
@@ -95,6 +96,7 @@ class Mode:
     set_name: str
     pole: complex
     name: str | None = None       # the exercise's physical name (``Exercise.mode_names``), if any
+    shares: tuple = ()            # ((state label, participation share), ...), largest first (``analysis.name_modes``)
 
     @property
     def is_real(self) -> bool:
@@ -136,11 +138,12 @@ def _duration(seconds: float) -> str:
     return f"{seconds * 1e3:.3g} ms" if seconds < 1 else f"{seconds:.3g} s"
 
 
-def modes(poles: dict[str, np.ndarray], names: dict[str, list] | None = None) -> list[Mode]:
+def modes(poles: dict[str, np.ndarray], names: dict[str, list] | None = None,
+          shares: dict[str, list] | None = None) -> list[Mode]:
     """The modes of all sets, numbered by category (``CATEGORIES`` order), then set, then
     from the most unstable (largest Re s) down; ``names`` (``Exercise.mode_names``: per set,
     one name or None per pole in the set's order) names them."""
-    names = names or {}
+    names, shares = names or {}, shares or {}
     order = {c.name: k for k, c in enumerate(CATEGORIES)}
     sets = sorted(poles, key=lambda name: order[category(name).name])
     found = []
@@ -148,10 +151,12 @@ def modes(poles: dict[str, np.ndarray], names: dict[str, list] | None = None) ->
         ps = np.asarray(poles[set_name], dtype=complex)
         given = list(names.get(set_name) or [])
         given += [None] * (ps.size - len(given))
-        upper = [(p, given[k]) for k, p in enumerate(ps) if p.imag >= -1e-9 * max(abs(p), 1.0)]
-        found += [(set_name, complex(p.real, abs(p.imag) if abs(p.imag) > 1e-9 * max(abs(p), 1.0) else 0.0), name)
-                  for p, name in sorted(upper, key=lambda pair: -pair[0].real)]
-    return [Mode(k + 1, set_name, p, name) for k, (set_name, p, name) in enumerate(found)]
+        parts = list(shares.get(set_name) or [])
+        parts += [()] * (ps.size - len(parts))
+        upper = [(p, given[k], parts[k] or ()) for k, p in enumerate(ps) if p.imag >= -1e-9 * max(abs(p), 1.0)]
+        found += [(set_name, complex(p.real, abs(p.imag) if abs(p.imag) > 1e-9 * max(abs(p), 1.0) else 0.0),
+                   name, part) for p, name, part in sorted(upper, key=lambda item: -item[0].real)]
+    return [Mode(k + 1, set_name, p, name, part) for k, (set_name, p, name, part) in enumerate(found)]
 
 
 def table_markdown(pole_view: PoleView | dict) -> str:
@@ -159,7 +164,7 @@ def table_markdown(pole_view: PoleView | dict) -> str:
     if isinstance(pole_view, dict):
         pole_view = PoleView(pole_view)
     rows = ["| # | set | mode | f_n [Hz] | ζ | s [rad/s] |", "|---:|---|---|---:|---:|---|"]
-    for m in modes(pole_view.poles, pole_view.names):
+    for m in modes(pole_view.poles, pole_view.names, pole_view.shares):
         dot = f'<span style="color:{category(m.set_name).color}">●</span>'
         s = f"{m.pole.real:.0f}" if m.is_real else f"{m.pole.real:.0f} ± {m.pole.imag:.0f}j"
         rows.append(f"| {m.number} | {dot} {m.set_name} | {m.label} | {m.natural_hz:.3g} | {m.damping:.2f} | {s} |")
@@ -229,6 +234,7 @@ class PoleView:
     poles: dict
     locus: Locus | None = None
     names: dict = field(default_factory=dict)     # ``Exercise.mode_names`` of these poles
+    shares: dict = field(default_factory=dict)    # per set, per pole: its states' participation shares
 
     def same_as(self, other: PoleView | None) -> bool:
         return (other is not None and self.poles.keys() == other.poles.keys() and self.names == other.names
@@ -242,13 +248,61 @@ def view(exercise: Exercise, values: dict, poles: dict[str, np.ndarray]) -> Pole
     """The pole view of an analysis with the exercise's mode names; the root locus (or the
     names) are left out if they cannot be computed here."""
     try:
-        names = exercise.mode_names(values, poles)
+        names, shares = _cached_physical_names(exercise, values, poles)
     except (ValueError, ArithmeticError, KeyError, IndexError):             # incl. LinAlgError
-        names = {}
+        names, shares = {}, {}
     try:
-        return PoleView(poles, locus(exercise, values), names)
+        for set_name, given in exercise.mode_names(values, poles).items():   # a given name wins
+            derived = names.get(set_name) or [None] * len(given)
+            names[set_name] = [g if g is not None else d for g, d in zip(given, derived)]
+    except (ValueError, ArithmeticError, KeyError, IndexError):
+        pass
+    try:
+        return PoleView(poles, locus(exercise, values), names, shares)
     except (ValueError, ArithmeticError, KeyError, NotImplementedError):
-        return PoleView(poles, names=names)
+        return PoleView(poles, names=names, shares=shares)
+
+
+_names_cache: OrderedDict = OrderedDict()
+
+
+def _cached_physical_names(exercise: Exercise, values: dict, poles: dict) -> tuple[dict, dict]:
+    """``physical_names`` of the exercise's ``mode_matrices``, kept per setting (the analysis
+    thread redraws the same setting several times; an uploaded recording is never cached)."""
+    key = None
+    if values.get("data") is None:
+        key = (exercise.name, tuple(sorted((k, v) for k, v in values.items() if k not in NOT_IN_LOCUS)),
+               tuple((name, np.asarray(p, dtype=complex).tobytes()) for name, p in poles.items()))
+        with _locus_lock:
+            if key in _names_cache:
+                names, shares = _names_cache[key]
+                return {k: list(v) for k, v in names.items()}, dict(shares)
+    names, shares = physical_names(exercise.mode_matrices(values), poles)
+    if key is not None:
+        with _locus_lock:
+            _names_cache[key] = ({k: list(v) for k, v in names.items()}, dict(shares))
+            while len(_names_cache) > LOCUS_CACHE:
+                _names_cache.popitem(last=False)
+    return names, shares
+
+
+def physical_names(matrices: dict, poles: dict[str, np.ndarray], tolerance: float = 1e-5) -> tuple[dict, dict]:
+    """(names, shares) of the pole sets that ``Exercise.mode_matrices`` gives a state matrix for:
+    each pole takes the name and participation shares of the eigenvalue of that matrix it is
+    (``analysis.name_modes``; matched within ``tolerance`` × |s|, None where none matches)."""
+    names, shares = {}, {}
+    for set_name, (A, states, T) in matrices.items():
+        if set_name not in poles:
+            continue
+        named = analysis.name_modes(A, states, T)
+        names[set_name], shares[set_name] = [], []
+        for p in np.asarray(poles[set_name], dtype=complex):
+            distance = [abs(p - m.pole_s) for m in named]
+            k = int(np.argmin(distance)) if distance else -1
+            close = k >= 0 and distance[k] <= tolerance * max(abs(p), 1.0)
+            names[set_name].append(named[k].name if close else None)
+            shares[set_name].append(named[k].shares if close else ())
+    return names, shares
 
 
 def dominant_decay_rad_s(poles: dict[str, np.ndarray]) -> float:
@@ -266,22 +320,23 @@ def _dominant(p: np.ndarray, limit: float) -> np.ndarray:
     return p[(np.abs(p.real) <= limit) | (damping < LIGHT_DAMPING)]
 
 
-def charts(pole_view: PoleView | dict) -> tuple[tuple[tuple, dict], tuple[tuple, dict]]:
+def charts(pole_view: PoleView | dict, marked: Mode | None = None) -> tuple[tuple[tuple, dict], tuple[tuple, dict]]:
     """uPlot arguments of the two pole maps: the dominant poles (slow, or lightly
     damped: |Re s| below ``dominant_decay_rad_s`` or damping below
-    ``LIGHT_DAMPING``) and all poles."""
+    ``LIGHT_DAMPING``) and all poles; ``marked`` (the "Show mode" choice) ringed on both."""
     if isinstance(pole_view, dict):
         pole_view = PoleView(pole_view)
     poles, path = pole_view.poles, pole_view.locus
     limit = dominant_decay_rad_s(poles)
-    numbered = modes(poles, pole_view.names)
+    numbered = modes(poles, pole_view.names, pole_view.shares)
     chosen = {name: _dominant(p, limit) for name, p in poles.items()}
     path_points = np.zeros(0, dtype=complex) if path is None else path.poles.ravel()
     path_points = path_points[np.isfinite(path_points)]
     title = f"Dominant poles (Re s > −{limit:.0f} rad/s or damping ζ < {LIGHT_DAMPING})"
     shown_modes = [m for m in numbered if _dominant(np.array([m.pole]), limit).size]
-    return (pole_map(chosen, title, shown_modes, _dominant(path_points, limit), path),
-            pole_map(poles, "All poles", numbered, path_points, path))
+    in_dominant = marked if marked is not None and _dominant(np.array([marked.pole]), limit).size else None
+    return (pole_map(chosen, title, shown_modes, _dominant(path_points, limit), path, in_dominant),
+            pole_map(poles, "All poles", numbered, path_points, path, marked))
 
 
 def span(points: np.ndarray) -> tuple[tuple[float, float], tuple[float, float]]:
@@ -327,7 +382,8 @@ def _labels(shown: list[Mode], x_range: tuple[float, float]) -> tuple[tuple[floa
 
 
 def pole_map(poles: dict[str, np.ndarray], title: str, shown: list[Mode] | None = None,
-             path_points: np.ndarray | None = None, path: Locus | None = None) -> tuple[tuple, dict]:
+             path_points: np.ndarray | None = None, path: Locus | None = None,
+             marked: Mode | None = None) -> tuple[tuple, dict]:
     """A pole map as a scatter plot over one shared, sorted real axis (each pole
     set a series with gaps where the others have their poles), with the
     imaginary axis drawn as a dashed line between two extra rows at Re s = 0,
@@ -351,6 +407,12 @@ def pole_map(poles: dict[str, np.ndarray], title: str, shown: list[Mode] | None 
             points=viser.uplot.Series_Points(show=True, size=size, width=2.0,
                                              fill="#ffffff" if hollow else color, stroke=color)),
             np.asarray(points, dtype=complex)))
+    if marked is not None:                            # a ring around the chosen mode (and its mirror)
+        ring = np.array([marked.pole] if marked.is_real else [marked.pole, np.conj(marked.pole)])
+        layers.append((viser.uplot.Series(
+            label=f"mode #{marked.number}: {marked.label}", stroke=MARK_COLOR, width=0,
+            points=viser.uplot.Series_Points(show=True, size=MARK_SIZE, width=3.0, fill="rgba(0,0,0,0)",
+                                             stroke=MARK_COLOR)), ring))
     axis_ends = np.array([y_range[0], y_range[1]]) / (1 + MARGIN) * 1j
     layers.append((viser.uplot.Series(label="Re s = 0", stroke="#000000", width=1, dash=(6.0, 4.0),
                                       points=viser.uplot.Series_Points(show=False)), axis_ends))
@@ -368,3 +430,56 @@ def pole_map(poles: dict[str, np.ndarray], title: str, shown: list[Mode] | None 
         "title": title, "legend": viser.uplot.Legend(live=False), "padding": scope.PADDING, "axes": axes,
         "scales": {"x": viser.uplot.Scale(time=False, range=x_range),
                    "y": viser.uplot.Scale(auto=False, min=y_range[0], max=y_range[1])}}
+
+
+# -- "Show mode": one mode ringed on the maps, with its name and state participation ------------
+NO_MODE = "(none)"
+
+
+def mode_choice(mode: Mode) -> str:
+    """The "Show mode" dropdown's text of a mode."""
+    return f"#{mode.number} {mode.label} ({mode.natural_hz:.3g} Hz)"
+
+
+def mode_choices(pole_view: PoleView) -> tuple[str, ...]:
+    return (NO_MODE, *(mode_choice(m) for m in modes(pole_view.poles, pole_view.names, pole_view.shares)))
+
+
+def follow(pole_view: PoleView, previous: Mode | None) -> Mode | None:
+    """The mode of ``pole_view`` that is ``previous`` after a slider moved: the same set and
+    name (the nearest pole if several share it), else the same number; None if none is left."""
+    if previous is None:
+        return None
+    found = modes(pole_view.poles, pole_view.names, pole_view.shares)
+    alike = [m for m in found if m.set_name == previous.set_name and m.label == previous.label]
+    if alike:
+        return min(alike, key=lambda m: abs(m.pole - previous.pole))
+    return next((m for m in found if m.number == previous.number and m.set_name == previous.set_name), None)
+
+
+def chosen(pole_view: PoleView, choice: str) -> Mode | None:
+    return next((m for m in modes(pole_view.poles, pole_view.names, pole_view.shares) if mode_choice(m) == choice),
+                None)
+
+
+def detail_markdown(mode: Mode | None) -> str:
+    """What the student reads about the chosen mode: name, set, s, f_n, ζ, time constant and the
+    states that take part in it (participation factors, ``analysis.participation``)."""
+    if mode is None:
+        return ("*Pick a mode in “Show mode” to ring it on both maps (orange) and read its name, "
+                "frequency, damping and which states take part in it.*")
+    s = f"{mode.pole.real:.4g}" if mode.is_real else f"{mode.pole.real:.4g} ± {mode.pole.imag:.4g}j"
+    decay = f"{_duration(-1.0 / mode.pole.real)}" if mode.pole.real < 0 else "— (not decaying)"
+    lines = [(f"**Mode #{mode.number}: {mode.label}** "
+             f'(<span style="color:{category(mode.set_name).color}">●</span> {mode.set_name})'), "",
+             "| s [rad/s] | f_n [Hz] | ζ | time constant τ = −1/Re s |", "|---|---:|---:|---:|",
+             f"| {s} | {mode.natural_hz:.4g} | {mode.damping:.3f} | {decay} |"]
+    shown = [(label, share) for label, share in mode.shares if share >= 0.01]
+    if shown:
+        lines += ["", "State participation (share of the mode; the name is the physics with the largest share):", "",
+                  "| state [unit] | share |", "|---|---:|"]
+        lines += [f"| {label} | {100 * share:.0f} % |" for label, share in shown]
+    else:
+        lines += ["", "*(named from the plant model's structure; no participation factors for this set)*"
+                  if mode.name else "*(no state matrix for this set: generic kind only)*"]
+    return "\n".join(lines)

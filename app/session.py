@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import viser
 
-from app import export, frames, inspector, layout, margins, pole_map, scope, worksheets
+from app import entry, export, frames, inspector, layout, margins, mode_picker, pole_map, scope, worksheets
 from app.access import token_matches
 from app.actions import ActionPanel
 from app.live import LivePlots, SpeedMeter
@@ -56,11 +56,9 @@ SCOPE_ASPECT = 2.2                # width / height of a scope chart
 SETTLE_BEFORE_REMOVAL_S = 0.3     # an exercise switch waits this long between the last chart update and removal
 LOG_SCALE = {"distr": 3, "log": 10}   # uPlot's logarithmic scale
 LOG_DECADES = 4                   # a logarithmic plot shows at most this many decades
-#: What the number boxes beside the sliders do with unusual entries (the browser handles them, unseen
-#: by the server: issue 11, defect 10)
-NUMBER_BOX_HINT = ("*Number boxes: 0.5 or 0,5; a value beyond a slider's ends (its range, shown under it) is "
-                   "refused and the box shows the value in use again; letters are not taken, and an emptied "
-                   "box changes nothing.*")
+#: What the boxes beside the sliders take (app/entry.py; issue 11, defect 10)
+NUMBER_BOX_HINT = ("*Type a value in the box beside a slider: 0.5 or 0,5 or 5e-1. A value outside the slider's "
+                   "range (under it) is refused with a note under the box, which shows the value in use again.*")
 PANEL_TABS = (("Scope", viser.Icon.WAVE_SINE), ("Pole map", viser.Icon.CHART_DOTS),
               ("Analysis", viser.Icon.CHART_LINE), ("Worksheet", viser.Icon.NOTEBOOK))
 AUTOSAVE_AFTER_S = 1.0            # a tab's autosave is written this long after its last change
@@ -480,6 +478,8 @@ class LabSession:
             self.download_note = gui.add_markdown("")     # what the button did, where the student looks
         self.inputs: dict[str, viser.GuiInputHandle] = {}
         self.refused: dict[str, bool] = {}            # boxes being put back to the value in use (_refuse)
+        self.entries: dict[str, viser.GuiInputHandle] = {}   # typed-value boxes (app/entry.py)
+        self.entry_notes: dict[str, viser.GuiMarkdownHandle] = {}   # a refused entry's line, under its box
         groups: dict[str, list[Parameter]] = {}
         for parameter in self.exercise.parameters:
             groups.setdefault(parameter.group, []).append(parameter)
@@ -490,6 +490,7 @@ class LabSession:
                     self.inputs[parameter.name] = self._add_input(parameter, ranges.get(parameter.name))
         gui.add_markdown(NUMBER_BOX_HINT)
         gui.add_html(scope.LEGEND_STYLE)
+        gui.add_html(entry.STYLE)
         self.error = gui.add_markdown("")
         if self.store is not None:
             with gui.add_folder("Saved experiment", expand_by_default=False):
@@ -530,6 +531,8 @@ class LabSession:
             self.shown_poles = pole_map.view(self.exercise, dict(self.values), first.poles)
             self.pole_plots = tuple(gui.add_uplot(data, **options, aspect=1.6)
                                     for data, options in pole_map.charts(self.shown_poles))
+            self.mode_picker = mode_picker.ModePicker(gui, self.pole_plots, self.shown_poles)
+            self.mode_picker.dropdown.on_update(self._on("show mode", self._pick_mode))
             gui.add_markdown(pole_map.legend_markdown())
             gui.add_markdown("Poles in the s-plane (discrete poles mapped by s = ln z / T); the dashed line is "
                              "the imaginary axis, right of it is unstable. The first map leaves out the fast, "
@@ -577,20 +580,42 @@ class LabSession:
         if parameter.choices:
             handle = gui.add_dropdown(label, parameter.choices, initial_value=value, hint=parameter.description)
         elif parameter.log:
-            # three decimals of the exponent (0.2 % of the value) fit the number box
-            handle = gui.add_slider(f"log₁₀ {label}", np.log10(parameter.minimum), np.log10(parameter.maximum),
-                                    step=0.001, initial_value=round(float(np.log10(value)), 3),
-                                    hint=_with_range(parameter))
-        elif parameter.integer:
-            handle = gui.add_number(label, int(value), min=int(parameter.minimum),
-                                    max=int(parameter.maximum), step=1, hint=_with_range(parameter))
+            # a logarithmic slider (its ends marked in the parameter's unit); the box shows the value
+            ends = np.log10(parameter.minimum), np.log10(parameter.maximum)
+            handle = gui.add_slider(label, *ends, step=0.001, initial_value=round(float(np.log10(value)), 3),
+                                    marks=tuple((end, f"{10 ** end:g}") for end in ends),
+                                    hint=f"{_with_range(parameter)} Logarithmic slider.")
+        elif parameter.integer:                       # a box only (app/entry.py)
+            return self._add_entry(parameter, label, _with_range(parameter))
         else:
             low, high = span if span and span[1] > span[0] else (parameter.minimum, parameter.maximum)
             handle = gui.add_slider(label, low, high,
                                     step=parameter.step or (parameter.maximum - parameter.minimum) / 1000,
                                     initial_value=min(max(float(value), low), high), hint=_with_range(parameter))
         handle.on_update(self._on(("input", parameter.name), lambda p=parameter, h=handle: self._on_input(p, h.value)))
+        if not parameter.choices:
+            self._add_entry(parameter, "", None)          # beside the slider, in place of its number box
         return handle
+
+    def _add_entry(self, parameter: Parameter, label: str, hint: str | None):
+        """The box a value is typed into, read once the student stops typing (app/entry.py)."""
+        def still(box) -> None:
+            self.post(("typed", parameter.name), lambda: self._on_typed(parameter, box))
+        self.entries[parameter.name] = entry.add_box(self.client.gui, parameter, self.values[parameter.name],
+                                                     label, still, hint)
+        self.entry_notes[parameter.name] = self.client.gui.add_markdown("", visible=False)
+        return self.entries[parameter.name]
+
+    def _tell(self, name: str | None, markdown: str) -> None:
+        """One line for the student: under the box of parameter ``name`` where it has one (where
+        the student looks), else at the foot of the controls; "" clears it."""
+        for other, note in self.entry_notes.items():
+            if other != name and note.visible:
+                note.visible = False
+        note = self.entry_notes.get(name)
+        if note is not None and markdown:
+            note.content, note.visible = markdown, True
+        self.error.content = "" if note is not None else markdown
 
     def _follow_ranges(self) -> None:
         """Sliders whose range depends on other values (e.g. the loaded recording's length) span that
@@ -623,16 +648,36 @@ class LabSession:
             scales={"x": viser.uplot.Scale(time=False)}, aspect=SCOPE_ASPECT)
 
     # -- events --------------------------------------------------------------------
+    def _on_typed(self, parameter: Parameter, box) -> None:
+        """A value typed into ``parameter``'s box: refused with one line, or set through the slider."""
+        with self.gui_lock:
+            if self.entries.get(parameter.name) is not box:
+                return                                # an earlier exercise's box
+        text = box.value
+        try:
+            value = entry.read(parameter, text)
+        except ParameterError as error:
+            self._refuse(parameter, entry.refusal(parameter, text, str(error), self.values[parameter.name]))
+            return
+        handle = self.inputs.get(parameter.name, box)
+        shown = float(np.log10(value)) if parameter.log else value
+        self._on_input(parameter, shown)
+        if handle is not box and handle.value != shown:
+            self.refused[parameter.name] = True       # the slider follows; its echo changes nothing
+            handle.value = shown
+
     def _on_input(self, parameter: Parameter, shown) -> None:
         value = 10 ** float(shown) if parameter.log else shown
         try:
             value = parameter.parse(value)
-        except ParameterError as error:
-            self._refuse(parameter, error)
+        except ParameterError:
+            self._refuse(parameter, entry.refusal(parameter, f"{value}", "is out of range",
+                                                  self.values[parameter.name]))
             return
         if self.refused.pop(parameter.name, False) and np.isclose(value, self.values[parameter.name], rtol=1e-2):
             return                                    # the box put back by _refuse: its message stays
-        self.error.content = ""
+        entry.show(self.entries.get(parameter.name), value)
+        self._tell(None, "")
         self.scene_quiet_until = time.perf_counter() + SCENE_QUIET_AFTER_INPUT_S
         with self.lock:
             self.values[parameter.name] = value
@@ -654,16 +699,20 @@ class LabSession:
             except Exception as error:  # noqa: BLE001 - the 3D view is not worth the lab
                 self._problem("3D view", error)
 
-    def _refuse(self, parameter: Parameter, error: ParameterError) -> None:
-        """A value beyond the range (typed into a number box) is refused, not clamped: the message
-        names the range and the value in use, which the box shows again (issue 11, defect 10)."""
+    def _refuse(self, parameter: Parameter, message: str) -> None:
+        """A typed value that sets nothing (letters, empty, beyond the range) is refused, not clamped:
+        one line names the parameter, the entry and the range, and the box and slider show the
+        value in use again (issue 11, defect 10)."""
         in_use = self.values[parameter.name]
-        unit = f" {parameter.unit}" if parameter.unit and not parameter.choices else ""
-        self.error.content = f"⚠️ {escaped(error)}; the lab keeps {escaped(f'{in_use:g}' if not parameter.choices else in_use)}{escaped(unit)}."
+        self._tell(parameter.name, f"⚠️ {escaped(message)}")
+        box = self.entries.get(parameter.name)
+        entry.show(box, in_use)
         handle = self.inputs.get(parameter.name)
-        if handle is not None and not parameter.choices:
-            self.refused[parameter.name] = True
-            handle.value = round(float(np.log10(in_use)), 3) if parameter.log else in_use
+        if handle is not None and handle is not box and not parameter.choices:
+            shown = float(np.log10(in_use)) if parameter.log else in_use
+            if handle.value != shown:
+                self.refused[parameter.name] = True
+                handle.value = shown
 
     def _on_upload(self, uploaded) -> None:
         try:
@@ -795,11 +844,13 @@ class LabSession:
             if not poles.same_as(self.shown_poles):
                 self.shown_poles = poles
                 with self.client.atomic():            # series, axes and data change together
-                    for handle, (data, options) in zip(self.pole_plots, pole_map.charts(poles)):
-                        handle.series, handle.axes, handle.data = options["series"], options["axes"], data
-                        handle.scales, handle.title = options["scales"], options["title"]
+                    self.mode_picker.draw(poles)
                     self.pole_table.content = pole_map.table_markdown(poles)
         return True
+
+    def _pick_mode(self) -> None:
+        with self.gui_lock, self.client.atomic():
+            self.mode_picker.pick(self.mode_picker.dropdown.value)
 
     def _readouts_markdown(self, result: Analysis) -> str:
         """The readouts table: the analysis's figures, then the exercise's figures of the scope window."""
@@ -842,8 +893,11 @@ class LabSession:
                 return False
             carry, last, next_scene, next_readouts = state
             try:
-                state[0], state[2], state[3] = self._frame(generation, now, now - last, carry,
-                                                           next_scene, next_readouts)
+                # one wake-up of the event loop for the frame's messages (3D view, scope, readouts),
+                # not one per message: each wake-up is a system call
+                with self.client.atomic():
+                    state[0], state[2], state[3] = self._frame(generation, now, now - last, carry,
+                                                               next_scene, next_readouts)
             except Exception as error:  # noqa: BLE001 - reported; the next frame goes on
                 self._problem("simulation", error)
             state[1] = now
@@ -878,9 +932,11 @@ class LabSession:
             if not self.running:
                 return 0.0, next_scene, next_readouts
             steps, carry = int(carry), carry - int(carry)
-            started = time.thread_time()
+            timed = self.speed_meter.timed()          # a CPU-clock read is a system call: not every frame
+            started = time.thread_time() if timed else 0.0
             trace = self.simulation.advance(steps)
-            self.speed_meter.add(steps * self.simulation.sample_time_s, time.thread_time() - started, elapsed)
+            self.speed_meter.add(steps * self.simulation.sample_time_s,
+                                 time.thread_time() - started if timed else None, elapsed)
             window = self._window_rows()
             self.buffer = scope.append(self.buffer, trace, window)
             message = self.simulation.status_message()

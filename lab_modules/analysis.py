@@ -458,3 +458,85 @@ def loop_margins(open_loop, omega: np.ndarray | None = None) -> Margins:
     return Margins(min((g for g in gains if g > 1), default=np.inf),
                    max((g for g in gains if g < 1), default=0.0),
                    abs(pm) if np.isfinite(pm) else np.inf, float(wc), float(peak), float(peak_w), stable)
+
+
+# -- physical names of modes (the pole map) ---------------------------------------------------------
+@dataclass(frozen=True)
+class NamedMode:
+    """One eigenvalue of a state matrix with the physics it belongs to."""
+
+    pole_s: complex                   # [rad/s] (a discrete matrix's z mapped by s = ln z / T)
+    name: str                         # the physics of the states that dominate it
+    shares: tuple                     # ((state label, participation share), ...) largest first, shares sum to 1
+
+
+def participation(A) -> tuple[np.ndarray, np.ndarray]:
+    """Eigenvalues λ_k of ``A`` and the participation factors p[i, k] = |v_ik w_ik| / Σ_i |v_ik w_ik|
+    (right eigenvector v_k, left eigenvector w_k, Pérez-Arriaga, Verghese and Schweppe, IEEE
+    Trans. PAS-101 (1982) 3117): how much state i takes part in mode k.  Unlike the eigenvector's
+    entries they do not depend on the states' units (a diagonal scaling of the states cancels in
+    v_ik w_ik), so metres, amperes and volts compare fairly."""
+    A = np.asarray(A, dtype=float)
+    eigenvalues, right = scipy.linalg.eig(A)
+    left = np.linalg.inv(right).T                      # rows of V⁻¹: left eigenvectors with w_kᵀ v_k = 1
+    p = np.abs(right * left)
+    return eigenvalues, p / np.maximum(p.sum(axis=0, keepdims=True), 1e-300)
+
+
+def name_modes(A, states, sample_time_s: float | None = None, mixed: float = 0.3) -> list[NamedMode]:
+    """Physical names of the modes of a state matrix, from its eigenvectors.
+
+    ``states`` gives for each state of ``A`` (in order) ``(label with unit, physics)``, e.g.
+    ``("x [m]", "rotor position/velocity (suspension mode)")``; states that share a physics
+    (a position and its velocity) pool their participation factors (``participation``).  A mode
+    is named after the physics with the largest share; where the runner-up holds at least
+    ``mixed`` of it, both are named ("A + B").  The names follow the physics, not the index of
+    an eigenvalue, so they stay with a mode when a slider moves it.  ``sample_time_s``: ``A`` is
+    discrete, its eigenvalues z map to s = ln z / T.  Put ``A`` in coordinates with a physical
+    meaning first (e.g. a filter's estimation error instead of its estimate, a controller's modal
+    states: ``change_basis``), since participation factors depend on the basis."""
+    labels = [label for label, _ in states]
+    physics = [group for _, group in states]
+    if len(states) != np.shape(A)[0]:
+        raise ValueError(f"{len(states)} state names for a {np.shape(A)[0]}-state matrix")
+    eigenvalues, p = participation(A)
+    groups = list(dict.fromkeys(physics))
+    out = []
+    for k, lam in enumerate(eigenvalues):
+        pooled = sorted(((sum(p[i, k] for i in range(len(physics)) if physics[i] == g), g) for g in groups),
+                        reverse=True)
+        name = pooled[0][1]
+        if len(pooled) > 1 and pooled[1][0] >= mixed:
+            name = f"{name} + {pooled[1][1]}"
+        shares = tuple(sorted(((labels[i], float(p[i, k])) for i in range(len(labels))), key=lambda s: -s[1]))
+        with np.errstate(divide="ignore", invalid="ignore"):   # z = 0 (a pure delay) has no s
+            s = complex(lam) if sample_time_s is None else complex(z_to_s(lam, sample_time_s))
+        out.append(NamedMode(s, name, shares))
+    return out
+
+
+def change_basis(A, T) -> np.ndarray:
+    """T⁻¹ A T: the state matrix in the coordinates z' with z = T z' (same eigenvalues)."""
+    T = np.asarray(T, dtype=float)
+    return np.linalg.solve(T, np.asarray(A, dtype=float) @ T)
+
+
+def modal_basis(A) -> np.ndarray:
+    """A real basis of ``A``'s eigenvectors (a complex pair: real and imaginary part), each
+    column scaled to unit length; for putting a controller's states into modal coordinates."""
+    eigenvalues, vectors = np.linalg.eig(np.asarray(A, dtype=float))
+    columns, done = [], set()
+    for k, lam in enumerate(eigenvalues):
+        if k in done:
+            continue
+        v = vectors[:, k]
+        if abs(lam.imag) > 1e-12 * max(abs(lam), 1.0):
+            partner = min((j for j in range(len(eigenvalues)) if j != k and j not in done),
+                          key=lambda j: abs(eigenvalues[j] - np.conj(lam)))
+            done.add(partner)
+            columns += [v.real, v.imag]
+        else:
+            columns.append(v.real)
+        done.add(k)
+    basis = np.column_stack(columns)
+    return basis / np.linalg.norm(basis, axis=0)

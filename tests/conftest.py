@@ -50,10 +50,16 @@ class Tab:
         return self.page.locator("input").evaluate_all(
             "els => els.map(e => (e.offsetParent !== null && e.type !== 'hidden') ? e.value : null)")
 
+    def entry_box(self, label: str):
+        """The box a value of the control labelled ``label`` is typed into: the row's own text box
+        (a parameter without slider) or the one beside its slider (app/entry.py)."""
+        row = self.page.get_by_text(label, exact=True).locator("xpath=../../../..")
+        own = row.locator("input.mantine-TextInput-input")
+        return own if own.count() else row.locator("xpath=following-sibling::div[1]//input")
+
     def set_number(self, label: str, value: str) -> None:
-        """Type ``value`` into the number box of the control labelled ``label``."""
-        row = self.page.get_by_text(label, exact=True).locator("xpath=../../..")
-        box = row.locator("input:visible").last
+        """Type ``value`` into the box of the control labelled ``label`` (read once typing stops)."""
+        box = self.entry_box(label)
         box.fill(value)
         box.press("Enter")
 

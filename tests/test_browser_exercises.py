@@ -12,7 +12,6 @@ from lab_modules.exercises import get, registry
 from tests.conftest import browser_only
 
 pytestmark = browser_only
-DEFAULT_NOISE_BOX = "1.3323"                       # kalman_noise: position sensor noise [µm]
 
 
 CLIPPED_JS = """() => [...document.querySelectorAll('table, .uplot, label, h1, h2, h3, p, input')]
@@ -288,7 +287,7 @@ def test_record_a_run_in_the_browser_and_load_it_into_the_tuning_exercise(open_t
     page.get_by_role("button", name="Record a lead-lag run (CSV)").click()
     page.get_by_text("no recording: with sensor_noise_mm = 1").wait_for(timeout=20000)   # 1 mm loses the ball
     page.get_by_text("Plant", exact=True).click()                                         # open the folder
-    tab.set_number("log₁₀ Sensor noise σ [mm]", "-2")                                    # 0.01 mm
+    tab.set_number("Sensor noise σ [mm]", "0.01")
     with page.expect_download(timeout=30000) as download:
         page.get_by_role("button", name="Record a lead-lag run (CSV)").click()
     path = tmp_path / download.value.suggested_filename
@@ -331,49 +330,4 @@ def test_worksheet_beside_the_charts(open_tab):
     while _visible_learning_goals(page) and time.time() < deadline:
         time.sleep(0.2)
     assert _visible_learning_goals(page) == 0
-    assert not tab.errors, tab.errors
-
-
-def test_number_boxes_refuse_out_of_range_and_take_a_decimal_comma(open_tab):
-    """Issue 11, defect 10: a value beyond the range is refused with a message naming the range
-    and the value in use, which the box shows again; "0,5" is taken as 0.5; letters and an emptied
-    box change nothing (the box stays blank until the next entry: viser's number box keeps its own
-    text, unseen by the server); the tab says all this in one line."""
-    tab = open_tab()
-    page = tab.page
-    page.get_by_text("RMS displacement, measured feedback").first.wait_for(timeout=60000)
-    page.get_by_text("Number boxes: 0.5 or 0,5", exact=False).first.wait_for(timeout=5000)
-    row = page.get_by_text("Position sensor noise σ [µm]", exact=True).locator("xpath=../../..")
-    box = row.locator("input:visible").last
-
-    def enter(text: str, at_once: bool = False) -> None:
-        box.click()
-        box.press("Control+a")
-        box.press("Backspace")
-        if at_once:                                   # typed key by key, "99" would apply 9 first
-            box.fill(text)
-        elif text:
-            box.press_sequentially(text)
-        time.sleep(1.0)
-        box.press("Tab")                              # leave the box: the browser would clamp here
-        time.sleep(1.0)
-
-    def warnings() -> list[str]:
-        return [t for t in page.locator("p").all_inner_texts() if "⚠" in t]
-
-    measured = page.locator("tr").filter(has_text="RMS displacement, measured feedback").first
-    enter("99", at_once=True)
-    assert box.input_value() == DEFAULT_NOISE_BOX, box.input_value()
-    assert any("0 ... 10 µm" in w and "keeps 1.3323 µm" in w for w in warnings()), warnings()
-    before = measured.inner_text()
-    enter("0,5")
-    assert box.input_value() == "0.5" and not warnings(), (box.input_value(), warnings())
-    deadline = time.time() + 10
-    while measured.inner_text() == before and time.time() < deadline:
-        time.sleep(0.1)
-    assert measured.inner_text() != before, "0,5 did not reach the lab"
-    shown = measured.inner_text()
-    for text in ("abc", ""):
-        enter(text)
-        assert not warnings() and measured.inner_text() == shown, (text, warnings())
     assert not tab.errors, tab.errors

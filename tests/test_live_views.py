@@ -210,3 +210,6 @@ def test_speed_meter():
     text = meter.text(1.0)
     assert "**0.75× real time**, **falling behind** the time scale (1×)" in text and "98 %" in text
     assert "no headroom" in text
+    meter.add(0.01, 0.0005, 0.04)                                   # one timed frame, one not (TIMED_EVERY):
+    meter.add(0.01, None, 0.04)                                     # the share holds for both
+    assert "computing uses 1 % of one CPU core (99 % headroom)" in meter.text(0.25)

@@ -178,6 +178,13 @@ class Exercise:
         no names."""
         return {}
 
+    def mode_matrices(self, values: dict) -> dict[str, tuple]:
+        """State matrices whose eigenvalues are pole sets of ``Analysis.poles``, by set name:
+        (A, states, sample time [s] or None), ``states`` one (label with unit, physics) per state
+        of A (``analysis.name_modes``); the pole map names these sets' modes from A's
+        eigenvectors, so the names follow the physics when a slider moves a pole.  Default: none."""
+        return {}
+
     def open_loops(self, values: dict) -> dict:
         """Feedback loops broken at the plant input, by name -> open loop L (``control`` LTI
         system, S = 1 / (1 + L)); the app draws their Bode plots, margins and |S|max."""

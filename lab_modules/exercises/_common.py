@@ -12,6 +12,7 @@ from functools import lru_cache
 import control
 import numpy as np
 
+from lab_modules import analysis
 from lab_modules.controllers.pid import pid
 from lab_modules.plants.radial_bearing import RIG
 
@@ -78,3 +79,67 @@ def axis_plant_names(poles_s) -> list[str | None]:
     names = magnet_plant_names(poles_s, RIG.continuous_model(0.0).A, "rotor", AXIS_LAGS[:1])
     return [AXIS_LAGS[1] if name is None and abs(p.imag) == 0 and p.real < 0 else name
             for p, name in zip(np.asarray(poles_s, dtype=complex), names)]
+
+
+#: The radial axis's states with units and the physics each belongs to (paper 000: x, v from
+#: eq. 1 and 3, the coil current i from eq. 4 (amplifier lag T_a), the sensor's output x_d from
+#: eq. 12-13), in ``RIG.continuous_model``'s state order; what ``analysis.name_modes`` names by.
+AXIS_STATES = (("x [m]", "rotor position/velocity (suspension mode)"),
+               ("v [m/s]", "rotor position/velocity (suspension mode)"),
+               ("i [A]", "coil current"),
+               ("x_d [m]", "position sensor lag"))
+#: The estimation errors x̂ − x of the same states (a filter's error dynamics, eq. 2)
+AXIS_ERROR_STATES = (("x error [m]", "position/velocity estimate error"),
+                     ("v error [m/s]", "position/velocity estimate error"),
+                     ("i error [A]", "coil current estimate error"),
+                     ("x_d error [m]", "sensor-lag estimate error"))
+#: The integral of the position error that paper 000's LQG regulator adds (§IV, eq. 19)
+INTEGRAL_STATE = ("ξ = ∫(r − x) dt [m s]", "LQG position integrator")
+
+
+def controller_states(controller, basis) -> list[tuple[str, str]]:
+    """Names of a discrete controller's states in its modal ``basis`` (``analysis.modal_basis``):
+    a pole at z = 1 is the PID integrator (paper 000 §IV: 1/(T_I s)), any other the derivative
+    filter (τ) or, for other controllers, a compensator lag."""
+    A = np.asarray(controller.A, dtype=float)
+    out = []
+    for column in basis.T:
+        rayleigh = float(column @ A @ column / (column @ column))
+        integrator = abs(rayleigh - 1.0) < 1e-6
+        out.append(("PID integrator [V s]", "PID integrator") if integrator
+                   else ("PID derivative filter [V]", "PID derivative filter"))
+    return out
+
+
+def axis_loop_modes(axis, gain_factor: float = 1.0) -> tuple[np.ndarray, list[tuple[str, str]]]:
+    """The state matrix of an ``AxisSetup``'s closed loop (``loop_matrix``) in physical
+    coordinates, with its state names (``analysis.name_modes``): the plant's states, the
+    controller's modal states (integrator, derivative filter) and, when the filter is in the
+    loop, its estimation error x̂ − x instead of its estimate (the separation principle then
+    splits the loop's modes into control and filter-error modes)."""
+    loop = axis.loop(gain_factor=gain_factor)
+    A = np.asarray(loop.system.A)[loop.loop_states, loop.loop_states]
+    n, nc = axis.model.nstates, axis.controller.nstates
+    V = analysis.modal_basis(axis.controller.A) if nc else np.zeros((0, 0))
+    size = A.shape[0]
+    T = np.zeros((size, size))
+    T[:n, :n] = np.eye(n)
+    T[n:n + nc, n:n + nc] = V
+    states = list(AXIS_STATES[:n]) + controller_states(axis.controller, V)
+    if size > n + nc:                                  # the filter's estimate x_p = s + e
+        T[n + nc:, :n] = np.eye(n)
+        T[n + nc:, n + nc:] = np.eye(n)
+        states += list(AXIS_ERROR_STATES[:n])
+    return analysis.change_basis(A, T), states
+
+
+def axis_mode_matrices(axis, loop_set: str, error_set: str | None = None) -> dict:
+    """``Exercise.mode_matrices`` of a radial axis: its closed loop and the steady-state filter's
+    error A − A K C (eq. 2), both discrete at the rig's sample time."""
+    A_loop, states = axis_loop_modes(axis)
+    out = {loop_set: (A_loop, states, RIG.sample_time_s)}
+    if error_set is not None:
+        K, _ = axis.steady_state_filter
+        A, C = np.asarray(axis.model.A), np.asarray(axis.model.C)
+        out[error_set] = (A - A @ K @ C, list(AXIS_ERROR_STATES[:A.shape[0]]), RIG.sample_time_s)
+    return out

@@ -323,6 +323,16 @@ class AdaptiveFilter(Exercise):
         setup_ = setup(values)
         return {f"PID on {setup_.feedback}": loop_at_plant_input(setup_)}
 
+    def mode_matrices(self, values: dict) -> dict[str, tuple]:
+        """The fixed filter's error A − A K H by its states (paper 002 eq. 14-21: x, v, the
+        disturbance force F_St as a random walk and the sensor's delayed state x_M)."""
+        A, H, K, _ = steady_filter(values)
+        states = [("x error [m]", "position/velocity estimate error"),
+                  ("v error [m/s]", "position/velocity estimate error"),
+                  ("F_St error [N]", "disturbance-force estimate error"),
+                  ("x_M error [V]", "sensor-lag estimate error")]
+        return {"filter error (centre model)": (A - A @ K @ H, states, T)}
+
     def analyse(self, values: dict):
         trace, status = run(values)
         stats = statistics(trace)

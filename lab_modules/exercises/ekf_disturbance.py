@@ -48,7 +48,12 @@ from lab_modules import analysis
 from lab_modules.claims import Claim
 from lab_modules.estimators import extended_kalman as ef
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
-from lab_modules.exercises._common import axis_plant_names, ekf_loop_fields
+from lab_modules.exercises._common import (
+    AXIS_ERROR_STATES,
+    axis_mode_matrices,
+    axis_plant_names,
+    ekf_loop_fields,
+)
 from lab_modules.exercises.ekf_parameters import PARAMETERS as EKF_PARAMETERS_EXERCISE_PARAMETERS
 from lab_modules.exercises.ekf_parameters import linear_axis
 from lab_modules.exercises.kalman_noise import PARAMETERS as NOISE_EXERCISE_PARAMETERS
@@ -187,7 +192,13 @@ def gap_sweep(values: dict) -> dict:
 
 def filter_poles(values: dict) -> np.ndarray:
     """Continuous-equivalent poles of the steady-state filter linearised at the
-    centre (x = 0, i = 0): eigenvalues of Phi - Phi K G, K from python-control's dlqe."""
+    centre (x = 0, i = 0): eigenvalues of ``filter_error_matrix``."""
+    return analysis.z_to_s(np.linalg.eigvals(filter_error_matrix(values)), T)
+
+
+def filter_error_matrix(values: dict) -> np.ndarray:
+    """Phi - L G of the steady-state filter linearised at the centre (x = 0, i = 0), its
+    states (x, v, i, x_d, f_z) of eq. 13, L from python-control's dlqe."""
     physics = ef.physics_vector(RIG, values["filter_sensor_lag_us"] * 1e-6)
     F, Phi = np.zeros((ef.N_STATES, ef.N_STATES)), np.zeros((ef.N_STATES, ef.N_STATES))
     ef.jacobian(ef.NONLINEAR, np.zeros(ef.N_STATES), physics, F)
@@ -196,7 +207,7 @@ def filter_poles(values: dict) -> np.ndarray:
     Q = np.diag([0.0, values["filter_q_velocity"], values["filter_q_current"], 0.0, values["filter_q_force"]])
     R = np.diag([values["filter_r_position"], values["filter_r_current"]])
     L, _, _ = control.dlqe(Phi, np.eye(ef.N_STATES), G, Q, R)
-    return analysis.z_to_s(np.linalg.eigvals(Phi - L @ G), T)
+    return Phi - L @ G
 
 
 def fig_4_plot(values: dict, step: dict) -> Plot:
@@ -318,6 +329,13 @@ class EkfDisturbance(Exercise):
                      "the plant's sensor lag, fed by a steady-state Kalman filter of x, v, i with the same q_22, "
                      "q_33 and R; the force state f_z and its feedforward are left out.")
         return Analysis(readouts, poles, notes, [fig_4_plot(values, step), *fig_5_plots(values, sweep)])
+
+    def mode_matrices(self, values: dict) -> dict[str, tuple]:
+        """The linearised loop (paper 000 eq. 1-4, 12-13; PID §IV) and the EKF's error at the centre
+        (eq. 13: x, v, i, x_d and the force state f_z) by their states."""
+        states = [*AXIS_ERROR_STATES, ("f_z error [N]", "disturbance-force estimate error")]
+        return {**axis_mode_matrices(linear_axis(values), CLOSED_LOOP),
+                "filter error (at x = 0)": (filter_error_matrix(values), states, T)}
 
     def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
         """The open-loop plant's poles by name (the loops' poles keep their generic kind)."""

@@ -39,7 +39,12 @@ from lab_modules import analysis
 from lab_modules.claims import Claim
 from lab_modules.estimators import extended_kalman as ef
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
-from lab_modules.exercises._common import axis_plant_names, ekf_loop_fields, pid_from_values
+from lab_modules.exercises._common import (
+    axis_mode_matrices,
+    axis_plant_names,
+    ekf_loop_fields,
+    pid_from_values,
+)
 from lab_modules.exercises.kalman_noise import PARAMETERS as NOISE_EXERCISE_PARAMETERS
 from lab_modules.loops.radial_axis_ekf_loop import (
     EKFLoopSetup,
@@ -239,6 +244,11 @@ class EkfParameters(Exercise):
     def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
         """The open-loop plant's poles by name (the loops' poles keep their generic kind)."""
         return {"open-loop plant": axis_plant_names(poles["open-loop plant"])}
+
+    def mode_matrices(self, values: dict) -> dict[str, tuple]:
+        """The linear loop and its filter error by their states (paper 000 eq. 1-4, 12-13; PID §IV)."""
+        return axis_mode_matrices(linear_axis(values), "closed loop (linear, rated k_i, k_x)",
+                                  "filter error (x, v, i at rated k_i, k_x)")
 
     def locus_matrices(self, values: dict, factors: tuple[float, ...]) -> tuple[list[np.ndarray], float]:
         """The linear loop's state matrices (the states in the feedback) at these PID gains K."""

@@ -24,7 +24,7 @@ import numpy as np
 from lab_modules import analysis
 from lab_modules.claims import Claim
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
-from lab_modules.exercises._common import axis_plant_names, pid_from_values
+from lab_modules.exercises._common import axis_mode_matrices, axis_plant_names, pid_from_values
 from lab_modules.loops.radial_axis_experiment import AxisSetup, AxisSimulation
 from lab_modules.loops.radial_axis_loop import TRACE_COLUMNS
 from lab_modules.parameters import Parameter
@@ -235,6 +235,10 @@ class KalmanNoise(Exercise):
     def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
         """The open-loop plant's poles by name (the loops' poles keep their generic kind)."""
         return {"open-loop plant": axis_plant_names(poles["open-loop plant"])}
+
+    def mode_matrices(self, values: dict) -> dict[str, tuple]:
+        """The closed loop and the filter error by their states (paper 000 eq. 1-4, 12-13; PID §IV)."""
+        return axis_mode_matrices(setup(values), "closed loop", "filter error")
 
     def locus_matrices(self, values: dict, factors: tuple[float, ...]) -> tuple[list[np.ndarray], float]:
         """The loop's state matrices (the states in the feedback) at these gain factors."""

@@ -53,7 +53,13 @@ from lab_modules.controllers.lqr import (
 )
 from lab_modules.controllers.pid import pid, setpoint_filter
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series, kalman_noise
-from lab_modules.exercises._common import axis_plant_names, pid_from_values
+from lab_modules.exercises._common import (
+    AXIS_STATES,
+    INTEGRAL_STATE,
+    axis_mode_matrices,
+    axis_plant_names,
+    pid_from_values,
+)
 from lab_modules.loops.radial_axis_experiment import AxisSetup, AxisSimulation
 from lab_modules.loops.radial_axis_loop import OK, TRACE_COLUMNS
 from lab_modules.parameters import Parameter
@@ -707,6 +713,19 @@ class LqgVsPid(Exercise):
     def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
         """The open-loop plant's poles by name (the loops' poles keep their generic kind)."""
         return {"open-loop plant": axis_plant_names(poles["open-loop plant"])}
+
+    def mode_matrices(self, values: dict) -> dict[str, tuple]:
+        """The PID loop, the LQG regulator (plant states and the position integrator, eq. 19) and
+        the Kalman filter's error (eq. 2), by their states (paper 000)."""
+        loops, lqg = setups(values), regulator(values)
+        axis = loops["LQG"]
+        A_aug, B_aug = integral_augmented_model(axis.rig)
+        gain = np.array([*lqg.state_gain, -lqg.integral_gain_v_per_m_s])
+        matrices = axis_mode_matrices(loops["PID"], "PID loop with filter")
+        matrices.update(axis_mode_matrices(axis, "unused", "Kalman filter error"))
+        matrices.pop("unused")
+        matrices["LQG regulator"] = (A_aug - B_aug @ gain[None], [*AXIS_STATES[:3], INTEGRAL_STATE], T)
+        return matrices
 
     def locus_matrices(self, values: dict, factors: tuple[float, ...]) -> tuple[list[np.ndarray], float]:
         """The PID loop's state matrices (the states in the feedback) at these PID gains K."""

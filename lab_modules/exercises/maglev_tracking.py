@@ -260,6 +260,20 @@ class MaglevTracking(Exercise):
                  "clamped before eq. 2.23; the voltage grows as 1/x̂3 towards that edge.")]
         return Analysis(readouts, poles, notes, plots)
 
+    def mode_matrices(self, values: dict) -> dict[str, tuple]:
+        """The lead-lag loop by its states: the ball's gap and velocity and the coil current
+        (paper 004 eq. 2.10, linearised at 14.8 mm, eq. 2.13-2.14) and the compensator's three
+        states, pooled (participation summed over a block does not depend on the block's
+        realisation).  The feedback-linearised loop's poles are the design's −η roots of the
+        linear error dynamics (eq. 2.29), not eigenvalues of a physical state matrix: they keep
+        their generic kind."""
+        loop = control.feedback(TABLE_3_1.linear_model(), LEAD_LAG.transfer_function(), sign=1)
+        states = [("x₁ gap [m]", "ball position/velocity (levitation mode)"),
+                  ("x₂ velocity [m/s]", "ball position/velocity (levitation mode)"),
+                  ("x₃ coil current [A]", "coil current")]
+        states += [(f"lead-lag state {k + 1} [V]", "lead-lag compensator") for k in range(loop.nstates - 3)]
+        return {"lead-lag loop (linearised)": (np.asarray(loop.A), states, None)}
+
     def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
         """The linearised plant's poles by name (the loops' poles keep their generic kind)."""
         name = "open-loop plant (linearised, 14.8 mm)"

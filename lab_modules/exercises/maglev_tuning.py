@@ -141,10 +141,14 @@ def drawing_scale(values: dict) -> DrawingScale:
     return DrawingScale(exaggeration_for(float(np.max(np.abs(rec.measured_m - centre))), room), centre)
 
 
+def filter_sigma_m(rec: recordings.Recording, values: dict) -> float:
+    """The filter's sensor noise σ [m]: from the still segment (eq. 3.3) or the slider."""
+    return sensor_noise_m(rec, values) if values["r_source"] == "estimated" else values["filter_sensor_noise_mm"] * 1e-3
+
+
 def observe(rec: recordings.Recording, values: dict) -> dict[str, np.ndarray]:
     """The EKF as a pure observer of the recording (Fig. 3.23); columns by name."""
-    sigma = sensor_noise_m(rec, values) if values["r_source"] == "estimated" else \
-        values["filter_sensor_noise_mm"] * 1e-3
+    sigma = filter_sigma_m(rec, values)
     y0 = rec.measured_m[0]
     x = np.array([y0, 0.0, TABLE_3_1.equilibrium_current_a(y0)])       # §2.5.2
     P0 = values["initial_covariance"] * np.eye(3)
@@ -163,17 +167,24 @@ def observe(rec: recordings.Recording, values: dict) -> dict[str, np.ndarray]:
     return columns
 
 
-def linearised_poles(rec: recordings.Recording, observed: dict) -> dict[str, np.ndarray]:
-    """Open-loop plant and steady-state filter-error poles [rad/s] at the recording's mean gap."""
+def filter_error_matrix(rec: recordings.Recording, sigma_m: float, Q) -> tuple[np.ndarray, float]:
+    """(A − A K C, sample time [s]) of the steady-state filter linearised at the recording's mean
+    gap, states (x [m], v [m/s], i [A]) of paper 004 eq. 2.10; R = σ², python-control's dlqe with Q dt."""
     dt = float(np.median(np.diff(rec.time_s)))
-    gap = float(np.mean(rec.measured_m))
-    discrete = control.c2d(TABLE_3_1.linear_model(gap), dt)
+    discrete = control.c2d(TABLE_3_1.linear_model(float(np.mean(rec.measured_m))), dt)
     A, C = np.asarray(discrete.A), np.asarray(discrete.C)
-    R = float(observed["filter_sensor_noise_m"][0]) ** 2
-    Q = observed["Q"] * dt + 1e-30 * np.eye(3)       # keeps the Riccati equation well posed at Q = 0
+    R = sigma_m ** 2
+    Q = np.asarray(Q) * dt + 1e-30 * np.eye(3)       # keeps the Riccati equation well posed at Q = 0
     _, P, _ = control.dlqe(A, np.eye(3), C, Q, R)
     K = P @ C.T / (C @ P @ C.T + R)
-    error = np.linalg.eigvals(A - A @ K @ C)
+    return A - A @ K @ C, dt
+
+
+def linearised_poles(rec: recordings.Recording, observed: dict) -> dict[str, np.ndarray]:
+    """Open-loop plant and steady-state filter-error poles [rad/s] at the recording's mean gap."""
+    gap = float(np.mean(rec.measured_m))
+    A_error, dt = filter_error_matrix(rec, float(observed["filter_sensor_noise_m"][0]), observed["Q"])
+    error = np.linalg.eigvals(A_error)
     return {"open-loop plant (linearised)": np.linalg.eigvals(np.asarray(TABLE_3_1.linear_model(gap).A)),
             "filter error (steady state)": np.log(error.astype(complex)) / dt}
 
@@ -325,6 +336,16 @@ class MaglevTuning(Exercise):
         if rows < len(rec):
             notes.append(f"The filter diverged at t = {observed['time_s'][rows]:.3f} s.")
         return Analysis(readouts, linearised_poles(rec, observed), notes, plots)
+
+    def mode_matrices(self, values: dict) -> dict[str, tuple]:
+        """The steady-state filter's error by its states (paper 004 eq. 2.10: ball position,
+        velocity, coil current)."""
+        rec = recording(values)
+        A_error, dt = filter_error_matrix(rec, filter_sigma_m(rec, values), filter_q(values))
+        states = [("x error [m]", "ball position/velocity estimate error"),
+                  ("v error [m/s]", "ball position/velocity estimate error"),
+                  ("i error [A]", "coil current estimate error")]
+        return {"filter error (steady state)": (A_error, states, dt)}
 
     def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
         """The linearised plant's poles by name (at the recording's mean gap, as ``linearised_poles``)."""

@@ -45,7 +45,7 @@ import scipy.signal
 from lab_modules import analysis
 from lab_modules.claims import Claim
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
-from lab_modules.exercises._common import AXIS_LAGS, nearest_names, pid_from_values
+from lab_modules.exercises._common import AXIS_LAGS, controller_states, nearest_names, pid_from_values
 from lab_modules.loops.flexible_rotor_loop import (
     LOOP_OUTPUTS,
     LoopSimulation,
@@ -388,6 +388,31 @@ class SensorPlacement(Exercise):
     def locus_matrices(self, values: dict, factors: tuple[float, ...]) -> tuple[list[np.ndarray], float]:
         """The closed loop's state matrices at these gain factors."""
         return [np.asarray(loop(values, factor).A) for factor in factors], T
+
+    def mode_matrices(self, values: dict) -> dict[str, tuple]:
+        """The closed loop by its states: the rotor's modal coordinates η_j, η̇_j (each pair one
+        rotor mode; paper 005's beam model, ``plants.flexible_rotor``), the coil current and the
+        sensor lag (paper 000 eq. 4, 12), with the estimated feedback the filter's prediction of
+        the rigid model (x, v, i, x_d: it is not an error coordinate, the filter's model differs
+        from the plant), and the PID in its modal states (integrator, derivative filter)."""
+        n = int(values["modes"])
+        system = loop(values)
+        A = np.asarray(system.A)
+        comp = compensator(values)
+        controller = pid_from_values(values)
+        nc, npid = comp.nstates, controller.nstates
+        n_plant = A.shape[0] - nc
+        lags = [("i [A]", "coil current"), ("x_d [m]", "position sensor lag")]
+        states = ([(f"η_{j + 1} [m kg^½]", mode_name(j)) for j in range(n)]
+                  + [(f"η̇_{j + 1} [m kg^½/s]", mode_name(j)) for j in range(n)] + lags[:n_plant - 2 * n])
+        basis = np.eye(A.shape[0])
+        V = analysis.modal_basis(controller.A)
+        pid_at = n_plant + nc - npid                     # the PID's states come last in the compensator
+        basis[pid_at:, pid_at:] = V
+        estimate = [(label, "filter's estimate (rigid model)") for label in
+                    ("x̂ [m]", "v̂ [m/s]", "î [A]", "x̂_d [m]")[:nc - npid]]
+        states += estimate + controller_states(controller, V)
+        return {"closed loop": (analysis.change_basis(A, basis), states, T)}
 
     def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
         """The rotor's modes by name in the plant and the closed loop (``mode_poles``: by modal

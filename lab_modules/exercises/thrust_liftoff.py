@@ -35,7 +35,7 @@ import numpy as np
 
 from lab_modules import analysis
 from lab_modules.claims import Claim
-from lab_modules.estimators.thrust_kalman import PAPER_Q_N2
+from lab_modules.estimators.thrust_kalman import PAPER_Q_N2, H
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
 from lab_modules.exercises.kalman_noise import pairs
 from lab_modules.loops.thrust_liftoff_loop import (
@@ -373,6 +373,28 @@ class ThrustLiftoff(Exercise):
         series.append(("current limit", np.full(sigmas_um.size, s.current_limit_a), "#000000"))
         return Plot("Current-command noise vs sensor noise (linear, no limit)", "sensor noise σ_v [µm]",
                     "standard deviation [A]", sigmas_um, tuple(series))
+
+    def mode_matrices(self, values: dict) -> dict[str, tuple]:
+        """The two measured-feedback loops and the filter's error by their states (paper 003: the
+        collar's x, v of eq. 5, the current loop G(s) of Fig. 7, the PID's integral, its previous
+        error (the difference quotient's one-sample delay) and its filtered D term; the filter's
+        x, v error of eq. 13-17), in ``thrust_liftoff_loop._linear_step``'s order."""
+        s = setup(values)
+        collar = [("x [m]", "collar position/velocity (levitation mode)"),
+                  ("v [m/s]", "collar position/velocity (levitation mode)")]
+        g = [("G(s) state 1 [A]", "current loop G(s)"), ("G(s) state 2 [A]", "current loop G(s)")]
+        derivative = "PID D term"
+        pid = [("PID integral [A]", "PID integrator"), ("previous error [m]", derivative),
+               ("D term [A]", derivative)]
+        Phi, _, _ = s.design.matrices
+        gain = s.design.steady_state[0]
+        measured = replace(s, use_estimate=False)
+        return {"closed loop with G(s)": (linear_loop(measured, with_filter=False).M, collar + g + pid, T),
+                "closed loop without G(s)": (linear_loop(measured, current_loop=False, with_filter=False).M,
+                                             collar + pid, T),
+                "filter error": ((np.eye(2) - np.outer(gain, H)) @ Phi,
+                                 [("x error [m]", "position/velocity estimate error"),
+                                  ("v error [m/s]", "position/velocity estimate error")], T)}
 
     def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
         """The open-loop plant's two poles (``analyse`` lists +a, then −a) by name."""
