@@ -7,7 +7,8 @@ nothing).  Like the scope, their data go out as float32 straight to the wire,
 and their axes hold still without touching the chart's options (a changed
 scale or series makes viser rebuild the chart, which now and then came up
 without axes or lines): the x values span a fixed extent, the y range of
-``scope.StickyRange`` is spanned by invisible data and the plot's own series
+``scope.StickyRange`` is spanned by invisible data (and ``scope.LAYOUT_SERIES``
+lays the axes out with every draw) and the plot's own series
 take no part in uPlot's auto range (a NaN gap, e.g. outside a fit window,
 would spoil it).  ``Plot.shade`` intervals
 are a band between two series, the top of the y range inside an interval (its
@@ -25,7 +26,6 @@ from app import scope
 from lab_modules.exercises import Exercise, Plot
 
 LIVE_PERIOD_S = 0.25              # live plots: at most 4 updates/s (self_sensing: ~14 kB per update)
-LIVE_SETTLE_FRAMES = 8            # ~2 s widened, then the range: lays out the axes once sized (scope.SETTLE_FRAMES)
 LIVE_ASPECT = 2.2                 # as the scope charts
 SHADE_FILL = "rgba(31,119,180,0.12)"
 HIDDEN = {"stroke": "rgba(0,0,0,0)", "width": 0, "points": viser.uplot.Series_Points(show=False)}
@@ -38,12 +38,13 @@ def _series(plot: Plot) -> tuple[viser.uplot.Series, ...]:
     return (viser.uplot.Series(label=plot.x_label), *shade) + tuple(
         viser.uplot.Series(label=label, stroke=color, width=1.5, auto=False,    # the range: shade or anchor
                            points=viser.uplot.Series_Points(show=False))
-        for label, _, color in plot.series) + anchor
+        for label, _, color in plot.series) + anchor + (scope.LAYOUT_SERIES,)
 
 
-def chart_data(plot: Plot, range_: tuple[float, float] | None) -> tuple[np.ndarray, ...]:
+def chart_data(plot: Plot, range_: tuple[float, float] | None, frame: int = 0) -> tuple[np.ndarray, ...]:
     """The plot's columns as float32: x, the shade band's two series (if any), the series, the
-    anchor (if no shade); ``range_`` is the y range to hold (None: not yet known)."""
+    anchor (if no shade), the layout series of frame number ``frame`` (``scope.layout``);
+    ``range_`` is the y range to hold (None: not yet known)."""
     x = np.asarray(plot.x, dtype=float)
     low, high = range_ if range_ is not None else (0.0, 0.0)
     columns = [x.astype(np.float32)]
@@ -55,6 +56,7 @@ def chart_data(plot: Plot, range_: tuple[float, float] | None) -> tuple[np.ndarr
     columns += [np.asarray(y, dtype=float) for _, y, _ in plot.series]
     if not plot.shade:
         columns.append(scope.anchor(range_, len(x)))
+    columns.append(scope.layout(frame, len(x)))
     return tuple(np.asarray(c, dtype=np.float32) for c in columns)
 
 
@@ -71,12 +73,13 @@ class LivePlots:
         """Add the charts to the current container (the Scope tab), empty until the first draw."""
         self.exercise = exercise
         plots = exercise.live_plots(simulation)
-        self.ranges = [scope.StickyRange(LIVE_SETTLE_FRAMES) for _ in plots]
+        self.ranges = [scope.StickyRange() for _ in plots]
         self.shown = [(p.title, float(p.x[0]), float(p.x[-1])) for p in plots]
         self.handles = [gui.add_uplot(chart_data(plot, None), _series(plot), **_options(plot), aspect=LIVE_ASPECT)
                         for plot in plots]
         self.next_draw = 0.0
         self.drawn_until = None
+        self.frames = 0
 
     def draw(self, simulation, now: float, newest: float | None) -> None:
         """Redraw from ``simulation`` if ``LIVE_PERIOD_S`` has passed and its newest sample
@@ -84,10 +87,11 @@ class LivePlots:
         if not self.handles or now < self.next_draw or newest is None or newest == self.drawn_until:
             return
         self.next_draw, self.drawn_until = now + LIVE_PERIOD_S, newest
+        self.frames += 1
         for index, (plot, handle) in enumerate(zip(self.exercise.live_plots(simulation), self.handles)):
             y_range = self.ranges[index]
             y_range.update([np.asarray(y, dtype=float) for _, y, _ in plot.series], now)
-            data = chart_data(plot, y_range.shown())
+            data = chart_data(plot, y_range.shown(), self.frames)
             shown = (plot.title, float(plot.x[0]), float(plot.x[-1]))
             if shown != self.shown[index]:            # rare: a new period length or sample time
                 self.shown[index] = shown
@@ -99,16 +103,20 @@ class LivePlots:
 
 
 class SpeedMeter:
-    """How fast the simulation runs: simulated time per wall-clock second (what the tab
-    shows: the time scale, unless the server falls behind) and per second spent computing
-    it (how fast it could run: the simulation thread's CPU time, so waits for the GIL and
-    for other threads do not count).
+    """Whether the simulation keeps up with the time scale a student asked for, and how much
+    room is left: simulated time per wall-clock second (× real time) and the share of one CPU
+    core spent computing it (the simulation thread's CPU time per simulated second × simulated
+    time per wall-clock second; waits for the GIL and for other threads do not count).  The
+    share is what headroom means here: a speed "if computing were all" (simulated time per CPU
+    second) read as another speed and swung with the frame's chunk size (kalman_noise at 0.01×:
+    "1.9×" of tiny chunks).
 
     The CPU time is read on one frame in ``TIMED_EVERY`` (``timed()``): reading a thread's
     CPU clock is a system call, not a cheap clock read, and one call per tab and frame
-    was a measurable part of a tab's cost; the speed over a second is the same."""
+    was a measurable part of a tab's cost; the share over a second is the same."""
 
     TIMED_EVERY = 8
+    KEEPS_UP = 0.95               # shown/asked at or above this: keeping up (frames are 40 ms apart)
 
     def __init__(self) -> None:
         self.simulated_s = self.computing_s = self.wall_s = self.timed_simulated_s = 0.0
@@ -127,12 +135,18 @@ class SpeedMeter:
             self.computing_s += computing_s
             self.timed_simulated_s += simulated_s
 
-    def text(self) -> str:
-        """One line over the time since the last call ('' before anything ran); starts afresh."""
+    def text(self, asked: float = 1.0) -> str:
+        """One line over the time since the last call ('' before anything ran); starts afresh.
+        ``asked``: the time scale set [× real time]."""
         if self.wall_s <= 0 or self.simulated_s <= 0:
             return ""
         shown = self.simulated_s / self.wall_s
-        computing = self.timed_simulated_s / self.computing_s if self.computing_s > 0 else float("inf")
+        cpu_per_simulated = self.computing_s / self.timed_simulated_s if self.timed_simulated_s > 0 else 0.0
+        busy = 100.0 * cpu_per_simulated * shown
         self.simulated_s = self.computing_s = self.wall_s = self.timed_simulated_s = 0.0
-        return (f"Simulation speed: **{shown:.3g}× real time** (computing alone: {computing:.3g}× real time, "
-                "one core)")
+        uses = f"computing uses {busy:.0f} % of one CPU core" if busy >= 1 else "computing uses under 1 % of one CPU core"
+        if shown >= self.KEEPS_UP * asked:
+            return (f"Simulation: **{shown:.3g}× real time**, keeping up with the time scale ({asked:.3g}×); "
+                    f"{uses} ({max(100.0 - busy, 0.0):.0f} % headroom)")
+        return (f"Simulation: **{shown:.3g}× real time**, **falling behind** the time scale ({asked:.3g}×); "
+                + uses + (" (no headroom)" if busy >= 90 else " (the server is busy with other work)"))

@@ -2,7 +2,8 @@
 
 For every loop an exercise opens at the plant input (``Exercise.open_loops``):
 the open-loop Bode plot (|L| and arg L), the sensitivity |S| = 1 / |1 + L|
-with the ISO 14839-3 zone limits (A < 3, B < 4, C < 5, D above), and the
+in dB, as AMB engineers read it, with the ISO 14839-3 zone limits (A < 3 = 9.5 dB,
+B < 4 = 12 dB, C < 5 = 14 dB, D above), and the
 readouts gain margin (up and down: the bearing is open-loop unstable, so it
 is stable only between two gains), phase margin, |S|max and its zone.
 """
@@ -43,17 +44,17 @@ def margin_view(exercise: Exercise, values: dict) -> tuple[list, list[Plot], lis
                          "say by which factor the loop gain would have to change to cross the stability edge.")
         magnitude.append((f"|L| {name}", np.abs(L), color))
         phase.append((f"arg L {name}", np.degrees(np.unwrap(np.angle(L))), color))
-        sens.append((f"|S| {name}", 1.0 / np.abs(1.0 + L), color))
+        sens.append((f"|S| {name}", _decibels_of(1.0 / np.abs(1.0 + L)), color))
     f_hz = omega / (2 * np.pi)
-    limits = tuple((f"zone limit {zone}/{chr(ord(zone) + 1)}", np.full(len(f_hz), limit), c)
+    limits = tuple((f"zone limit {zone}/{chr(ord(zone) + 1)} ({limit:g}×)", np.full(len(f_hz), _decibels(limit)), c)
                    for (zone, limit), c in zip(analysis.ISO_14839_ZONES[:3], ZONE_COLORS))
     plots = [
         Plot("Open loop L at the plant input: magnitude (|L| = 1 at the gain crossover)", "frequency [Hz]",
              "|L| [1]", f_hz, tuple(magnitude) + (("|L| = 1", np.ones(len(f_hz)), "#7f7f7f"),),
              log_x=True, log_y=True),
         Plot("Open loop L at the plant input: phase", "frequency [Hz]", "arg L [°]", f_hz, tuple(phase), log_x=True),
-        Plot("Sensitivity |S| = 1/|1 + L|, ISO 14839-3 zones A < 3 (9.5 dB) < B < 4 (12 dB) < C < 5 (14 dB) < D",
-             "frequency [Hz]", "|S| [1]", f_hz,
+        Plot("Sensitivity |S| = 1/|1 + L|, ISO 14839-3 zones A < 9.5 < B < 12 < C < 14 dB < D",
+             "frequency [Hz]", "|S| [dB]", f_hz,
              tuple(sens) + limits, log_x=True),
     ]
     return readouts, plots, notes
@@ -61,6 +62,13 @@ def margin_view(exercise: Exercise, values: dict) -> tuple[list, list[Plot], lis
 
 def _decibels(factor: float) -> float:
     return float(20.0 * np.log10(factor)) if factor > 0 else -np.inf
+
+
+def _decibels_of(factors: np.ndarray) -> np.ndarray:
+    """20 log10 of each factor (a zero, |S| at an open-loop pole on the jω axis, is a gap: NaN)."""
+    factors = np.asarray(factors, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(factors > 0, 20.0 * np.log10(np.where(factors > 0, factors, 1.0)), np.nan)
 
 
 def _margin_readouts(name: str, m: analysis.Margins) -> list[tuple[str, float, str]]:

@@ -24,17 +24,12 @@ import numpy as np
 import viser
 
 SHRINK_AFTER_S = 3.0          # a range three times too large for this long shrinks
-#: For its first frames a scope shows a range this much wider than the traces need, then the
-#: range itself.  uPlot lays out a chart's axes when a scale changes; a chart whose scale was set
-#: before its panel had a size (right after a tab opened or an exercise switch) kept blank axes, no
-#: tick labels at all, for as long as its range held still, and a later resize did not help (seen on
-#: kalman_noise's and ekf_parameters' current charts; issue 11, defect 13).  The one planned change
-#: of range lays the axes out again once the chart has its size.
-SETTLE_FRAMES = 50
-SETTLE_WIDEN = 1.5
 HEADROOM = 1.2                # the range covers the traces with this factor
 PADDING = (12, 16, 0, 4)      # top, right, bottom, left [px]: the top tick label stays inside the chart
+#: log-frequency axes end on a decade whose label ("10,000") is centred on the right edge: room for its half
+LOG_X_PADDING = (12, 30, 0, 4)
 Y_AXIS_SIZE = 56              # px for the y tick labels (five significant characters)
+X_AXIS_SIZE = 50              # px for the x tick labels (uPlot's default, fixed: no size from the labels)
 
 
 def nice_ceiling(value: float) -> float:
@@ -65,20 +60,13 @@ def nice_range(low: float, high: float) -> tuple[float, float]:
 class StickyRange:
     """A y range that only moves when it must (see the module docstring)."""
 
-    def __init__(self, settle_frames: int = SETTLE_FRAMES) -> None:
+    def __init__(self) -> None:
         self.range: tuple[float, float] | None = None
         self.loose_since: float | None = None
-        self.frames = 0
-        self.settle_frames = settle_frames
 
     def shown(self) -> tuple[float, float] | None:
-        """The range the anchor spans this frame: ``range``, widened for the first ``settle_frames``."""
-        if self.range is None or self.frames >= self.settle_frames:
-            return self.range
-        low, high = self.range
-        if low < 0 < high:
-            return (low * SETTLE_WIDEN, high * SETTLE_WIDEN)
-        return (low - (SETTLE_WIDEN - 1) * (high - low), high)
+        """The range the anchor spans this frame (None before the first finite value)."""
+        return self.range
 
     def update(self, columns: list[np.ndarray], now: float | None = None) -> bool:
         """Follow the traces; True if the range changed."""
@@ -90,7 +78,6 @@ class StickyRange:
     def follow(self, low: float, high: float, now: float | None = None) -> bool:
         """``update`` from the lowest and highest finite value drawn (nothing finite: low > high);
         called once per frame."""
-        self.frames += 1
         if not low <= high:
             return False
         now = time.perf_counter() if now is None else now
@@ -116,6 +103,26 @@ class StickyRange:
 ANCHOR_CLASS = "lab-range-anchor"
 ANCHOR_SERIES = viser.uplot.Series(label="range", stroke="rgba(0,0,0,0)", width=0,
                                    points=viser.uplot.Series_Points(show=False), **{"class": ANCHOR_CLASS})
+#: A hidden series on a scale of its own, whose every frame alternates between two constant values:
+#: its scale changes with every frame, and uPlot lays a chart's axes out again whenever one of its
+#: scales changes.  Why it is needed (issue 11, defect 13): a panel tab's charts are made anew on
+#: every visit (the tab's content is unmounted while hidden), at width 0, and laid out there (no
+#: space: no tick labels).  The resize that follows lays them out again, but when it reaches uPlot
+#: in the same render as a data update, uplot-react's ``setData(data, false)`` + ``redraw()``
+#: resets uPlot's pending layout (``redraw`` sets ``shouldConvergeSize = recalcAxes || false``)
+#: and, with x and y ranges that hold still, nothing asks for it again: the axes stayed blank.
+#: Fixed axis sizes alone do not help (the tick values are computed in that layout); a y range
+#: that moves would (an earlier workaround showed a wider range for the first ~2 s).
+LAYOUT_SCALE = "layout"
+LAYOUT_SERIES = viser.uplot.Series(label="layout", scale=LAYOUT_SCALE, stroke="rgba(0,0,0,0)", width=0,
+                                   points=viser.uplot.Series_Points(show=False), **{"class": ANCHOR_CLASS})
+
+
+def layout(frame: int, n: int) -> np.ndarray:
+    """The layout series' values in frame number ``frame``: 1 or 2, alternately (float32)."""
+    return np.full(n, 1.0 + frame % 2, dtype=np.float32)
+
+
 #: A style element for the page (``gui.add_html``): the anchor series stays out of the legends.
 LEGEND_STYLE = f"<style>.u-legend .{ANCHOR_CLASS} {{ display: none; }}</style>"
 
@@ -129,10 +136,37 @@ def anchor(y_range: tuple[float, float] | None, n: int) -> np.ndarray:
 def chart_options(x_label: str, y_label: str) -> dict:
     """Axes, legend and padding shared by every chart of the lab: static legend (no '--'
     placeholders before a hover), room for the top tick label and for five-character y ticks."""
-    return {"axes": (viser.uplot.Axis(label=x_label),
+    return {"axes": (viser.uplot.Axis(label=x_label, size=X_AXIS_SIZE),
                      viser.uplot.Axis(label=y_label, size=Y_AXIS_SIZE)),
             "legend": viser.uplot.Legend(live=False),
             "padding": PADDING}
+
+
+_SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
+
+
+def decade_label(exponent: int) -> str:
+    """10^exponent as a tick label: plain from 0.001 to 1000, else 10⁻⁴, 10⁴ ... (uPlot's own
+    numbers keep three decimals, so every decade below 0.001 read "0")."""
+    if -3 <= exponent <= 3:
+        return f"{10.0 ** exponent:.{max(-exponent, 0)}f}"
+    return "10" + str(exponent).translate(_SUPERSCRIPT)
+
+
+def log_axis(low: float, high: float) -> dict:
+    """Static ``splits`` and ``values`` of a logarithmic axis over [low, high] (whole decades):
+    a labelled tick at every decade (every second one beyond eight decades), unlabelled ticks at
+    2 … 9 × 10^k while there are at most four decades."""
+    first, last = round(np.log10(low)), round(np.log10(high))
+    every = 1 if last - first <= 8 else 2
+    splits, values = [], []
+    for exponent in range(first, last + 1):
+        splits.append(10.0**exponent)
+        values.append(decade_label(exponent) if (exponent - last) % every == 0 else "")
+        if last - first <= 4 and exponent < last:
+            splits += [m * 10.0**exponent for m in range(2, 10)]
+            values += [""] * 8
+    return {"splits": splits, "values": values}
 
 
 def append(buffer: np.ndarray, trace: np.ndarray, rows: int) -> np.ndarray:

@@ -639,7 +639,7 @@ class LabSession:
             series += [viser.uplot.Series(label="+3σ", stroke="rgba(214,39,40,0.35)", width=1),
                        viser.uplot.Series(label="−3σ", stroke="rgba(214,39,40,0.35)", width=1)]
         series += [viser.uplot.Series(label=s.label, stroke=s.color, width=1.5) for s in chart.series]
-        series += [scope.ANCHOR_SERIES]               # holds the y range still without rebuilding the chart
+        series += [scope.ANCHOR_SERIES, scope.LAYOUT_SERIES]   # y range held still; axes laid out each frame
         bands = (viser.uplot.Band(series=(1, 2), fill="rgba(214,39,40,0.12)"),) if chart.band else None
         empty = (np.array([-self.window_ms, 0.0]),) + tuple(np.zeros(2) for _ in series[1:])
         return self.client.gui.add_uplot(
@@ -814,7 +814,9 @@ class LabSession:
                     self.plots.append(self.client.gui.add_uplot(data, **options, aspect=2.0))
                 self.plot_shapes.append(_plot_shape(plot))
             elif self.plot_shapes[k] == _plot_shape(plot):
-                self.plots[k].data, self.plots[k].scales = data, options["scales"]
+                with self.client.atomic():            # a log axis's ticks follow its range
+                    self.plots[k].data, self.plots[k].scales = data, options["scales"]
+                    self.plots[k].axes = options["axes"]
             else:
                 with self.client.atomic():            # series, axes and data change together
                     handle = self.plots[k]
@@ -952,7 +954,7 @@ class LabSession:
             self.live.draw(self.simulation, now, getattr(self, "drawn_until", None))
             if now >= next_readouts:
                 self._refresh_live_readouts()
-                self.speed.content = self.speed_meter.text()
+                self.speed.content = self.speed_meter.text(self.values.get("time_scale", 1.0))
                 next_readouts = now + LIVE_READOUT_PERIOD_S
             stop = getattr(self, "stop_shown", None)
             if stop is not None:
@@ -1005,6 +1007,7 @@ class LabSession:
         # the time axis runs from -window to 0 ms: float32 while that resolves a sample
         float32_time = _float32_resolves(np.array((self.window_ms,)), sample_time * 1e3)
         now = time.perf_counter()
+        self.frames_drawn = getattr(self, "frames_drawn", 0) + 1
         with self.client.atomic():                    # one wake-up of the event loop per frame, not per chart
             for plan, handle, y_range in zip(self.chart_plans, self.charts, self.y_ranges):
                 if self.closed:
@@ -1013,7 +1016,7 @@ class LabSession:
                                                               SCOPE_BUCKETS, ROUGHNESS_ROWS)
                 y_range.follow(low, high, now)
                 ys[-1, 0::2], ys[-1, 1::2] = y_range.shown() or (0.0, 0.0)   # the anchor series (scope.anchor)
-                data = (t32 if float32_time else t_ms, *ys)
+                data = (t32 if float32_time else t_ms, *ys, scope.layout(self.frames_drawn, len(t_ms)))
                 # Straight to the wire: the handle's ``data`` setter would cast every column to float64.
                 handle._impl.props.data = data
                 handle._queue_update("data", data)
@@ -1094,21 +1097,25 @@ def _plot_chart(plot: Plot) -> tuple[tuple, dict]:
         if plot.points else
         viser.uplot.Series(label=label, stroke=color, width=1.5, points=viser.uplot.Series_Points(show=False))
         for label, _, color in plot.series)
+    y_span = _log_span(*ys, decades=plot.log_decades or LOG_DECADES) if plot.log_y else _span(*ys)
     return (x, *ys), {
-        "series": series, "title": plot.title, "legend": viser.uplot.Legend(live=False), "padding": scope.PADDING,
-        "axes": (viser.uplot.Axis(label=plot.x_label), viser.uplot.Axis(label=plot.y_label)),
+        "series": series, "title": plot.title, "legend": viser.uplot.Legend(live=False),
+        "padding": scope.LOG_X_PADDING if plot.log_x else scope.PADDING,
+        "axes": (viser.uplot.Axis(label=plot.x_label),
+                 viser.uplot.Axis(label=plot.y_label, **(scope.log_axis(y_span["min"], y_span["max"])
+                                                         if plot.log_y else {}))),
         "scales": {"x": viser.uplot.Scale(time=False, **(LOG_SCALE if plot.log_x else {})),
-                   "y": viser.uplot.Scale(auto=False, **(LOG_SCALE | _log_span(*ys) if plot.log_y else _span(*ys)))}}
+                   "y": viser.uplot.Scale(auto=False, **(LOG_SCALE if plot.log_y else {}), **y_span)}}
 
 
-def _log_span(*arrays: np.ndarray) -> dict[str, float]:
+def _log_span(*arrays: np.ndarray, decades: int = LOG_DECADES) -> dict[str, float]:
     """A logarithmic plot range over the positive finite values of ``arrays`` in whole decades,
-    at most ``LOG_DECADES`` of them below the largest value."""
+    at most ``decades`` of them below the largest value."""
     positive = np.concatenate([a[np.isfinite(a) & (a > 0)] for a in arrays]) if arrays else np.zeros(0)
     if positive.size == 0:
         return {"min": 0.1, "max": 1.0}
     top = np.ceil(np.log10(positive.max()))
-    return {"min": 10.0 ** max(np.floor(np.log10(positive.min())), top - LOG_DECADES), "max": 10.0**top}
+    return {"min": 10.0 ** max(np.floor(np.log10(positive.min())), top - decades), "max": 10.0**top}
 
 
 def _span(*arrays: np.ndarray) -> dict[str, float]:

@@ -38,16 +38,16 @@ def test_ripple_zoom_speed_readout_and_monte_carlo_button(open_tab, lab_server):
     while (ripple is None or min(ripple["finite"]) == 0) and time.time() < deadline:
         time.sleep(0.25)
         ripple = page.evaluate(RIPPLE_JS)
-    # shade band (2), measured and true current, four fitted lines
-    assert ripple["series"] == 8 and ripple["finite"][2] == ripple["finite"][3] == 256, ripple
-    assert all(0 < n <= 17 for n in ripple["finite"][4:]), ripple
+    # shade band (2), measured and true current, four fitted lines, the hidden layout series (scope.LAYOUT_SERIES)
+    assert ripple["series"] == 9 and ripple["finite"][2] == ripple["finite"][3] == 256, ripple
+    assert all(0 < n <= 17 for n in ripple["finite"][4:8]), ripple
     assert ripple["y"][0] < ripple["y"][1]
     sums = {ripple["sum"]}
     for _ in range(8):                                # it follows the run (noise changes every period)
         time.sleep(0.3)
         sums.add(page.evaluate(RIPPLE_JS)["sum"])
     assert len(sums) > 1, "the ripple zoom stands still"
-    speed = page.get_by_text("Simulation speed:", exact=False).first
+    speed = page.get_by_text("Simulation:", exact=False).first
     speed.wait_for(timeout=5000)
     assert re.search(r"0\.2\d*× real time", speed.inner_text()), speed.inner_text()
 

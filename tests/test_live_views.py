@@ -163,8 +163,9 @@ def test_live_ripple_zoom_of_the_running_simulation():
 
 
 def test_live_plot_bandwidth_and_rate():
-    """self_sensing's live plots: at most 16 kB of float32 per update and 10 updates/s, so
-    ≤ 64 kB/s per tab at the app's 4 updates/s (the scope of this exercise sends ~370 kB/s)."""
+    """self_sensing's live plots: at most 17 kB of float32 per update (16 columns of 256 points,
+    one of them ``scope.LAYOUT_SERIES``) and 10 updates/s, so ≤ 68 kB/s per tab at the app's
+    4 updates/s (the scope of this exercise sends ~370 kB/s)."""
     exercise = get("self_sensing")
     simulation = exercise.simulation(exercise.resolve({}))
     simulation.advance(10)
@@ -172,7 +173,7 @@ def test_live_plot_bandwidth_and_rate():
                for column in chart_data(plot, (0.0, 1.0)))
     assert all(c.dtype == np.float32 for plot in exercise.live_plots(simulation) for c in chart_data(plot, None))
     assert LIVE_PERIOD_S >= 0.1
-    assert size <= 16_000 and size / LIVE_PERIOD_S <= 64_000, size
+    assert size <= 17_000 and size / LIVE_PERIOD_S <= 68_000, size
 
 
 def test_live_plots_draw_at_a_bounded_rate_and_only_when_the_run_moved_on():
@@ -188,7 +189,7 @@ def test_live_plots_draw_at_a_bounded_rate_and_only_when_the_run_moved_on():
     live.draw(simulation, 10.0 + 4 * LIVE_PERIOD_S, newest=2.0)     # paused: nothing new
     assert [len(h.sent) for h in gui.handles] == [2, 2]
     _x, top, bottom, *series = gui.handles[0].sent[-1]
-    low, high = live.ranges[0].shown()                              # widened while the chart settles
+    low, high = live.ranges[0].shown()                              # the range itself from the first frame
     assert set(np.unique(top)) == {np.float32(low), np.float32(high)} and np.all(bottom == np.float32(low))
     measured = series[0]
     assert low <= measured.min() and measured.max() <= high
@@ -200,6 +201,15 @@ def test_speed_meter():
     assert meter.text() == ""
     meter.add(0.01, 0.0005, 0.04)
     meter.add(0.01, 0.0005, 0.04)
-    text = meter.text()
-    assert "0.25× real time" in text and "20× real time" in text
+    text = meter.text(0.25)                                         # slow motion, asked for
+    assert "**0.25× real time**, keeping up with the time scale (0.25×)" in text
+    assert "computing uses 1 % of one CPU core (99 % headroom)" in text
+    assert "computing alone" not in text and "20×" not in text      # no second, confusing speed
     assert meter.text() == ""                                       # starts afresh
+    meter.add(0.03, 0.039, 0.04)                                    # asked 1×, got 0.75×: the CPU is the limit
+    text = meter.text(1.0)
+    assert "**0.75× real time**, **falling behind** the time scale (1×)" in text and "98 %" in text
+    assert "no headroom" in text
+    meter.add(0.01, 0.0005, 0.04)                                   # one timed frame, one not (TIMED_EVERY):
+    meter.add(0.01, None, 0.04)                                     # the share holds for both
+    assert "computing uses 1 % of one CPU core (99 % headroom)" in meter.text(0.25)

@@ -179,3 +179,24 @@ def test_recording_downloaded_from_the_tracking_exercise_loads_into_the_tuning_e
     values = tuning.resolve({"data": tuning.load_data(filename, content)})
     metrics = tuning.metrics(values, tuning.default_duration_s)
     assert metrics["estimated_sensor_noise_mm"] == pytest.approx(0.01, rel=0.10)
+
+
+@pytest.mark.parametrize("overrides", [{}, {"r_source": "slider", "filter_sensor_noise_mm": 1.0}])
+def test_small_mean_nis_stays_in_view(overrides):
+    """Issue 11, defect 13: a pessimistic filter's windowed mean NIS (1e-5 … 1e-3 here) is drawn on
+    the log axis beside the χ² bounds 0.74 … 1.30, not cut off below the chart's 4-decade floor."""
+    from app.session import _plot_chart
+    from lab_modules.exercises import get
+
+    exercise = get("maglev_tuning")
+    plot = next(p for p in exercise.analyse(exercise.resolve(overrides)).plots if p.title.startswith("NIS"))
+    means = plot.series[0][1]
+    assert np.nanmin(means) < 1e-3                                   # the case of the defect
+    y = _plot_chart(plot)[1]["scales"]["y"]
+    assert y["distr"] == 3                                           # logarithmic
+    assert y["min"] <= np.nanmin(means) and y["max"] >= plot.series[2][1][0]
+    # every decade labelled legibly: uPlot's own numbers (three decimals) read "0" below 0.001
+    axis = _plot_chart(plot)[1]["axes"][1]
+    labels = dict(zip(axis["splits"], axis["values"]))
+    assert labels[1e-4] == "10⁻⁴" and labels[1e-3] == "0.001" and labels[1.0] == "1"
+    assert "0" not in axis["values"] and all(labels[10.0**k] for k in range(-4, 1))

@@ -68,6 +68,18 @@ def test_iso_zones_and_the_analysis_tab_view():
     units = {unit for label, _, unit in readouts if label.startswith("PID: ")}
     assert units == {"×", "dB", "°", "Hz"}
     assert len(plots) == 3 and all(p.log_x for p in plots)
+    # |S| drawn in dB (as AMB engineers and ISO 14839-3 read it), its peak at the readout's dB value
+    sens = plots[2]
+    assert sens.y_label == "|S| [dB]" and not sens.log_y
+    curves = {label: y for label, y, _ in sens.series}
+    loop = get("lqg_vs_pid").open_loops(get("lqg_vs_pid").resolve({}))["PID"]
+    omega = 2 * np.pi * sens.x
+    direct = -20 * np.log10(np.abs(1 + np.squeeze(control.frequency_response(loop, omega).complex)))
+    assert np.allclose(curves["|S| PID"], direct, atol=1e-9)
+    peak_db = next(value for label, value, unit in readouts if label.startswith("PID: |S|max") and unit == "dB")
+    assert np.nanmax(curves["|S| PID"]) == pytest.approx(peak_db, abs=0.01)
+    limits = sorted(float(y[0]) for label, y, _ in sens.series if label.startswith("zone limit"))
+    assert limits == pytest.approx([9.542, 12.041, 13.979], abs=1e-3)
     assert margin_view(get("self_sensing"), get("self_sensing").resolve({})) == (
         [], [], [get("self_sensing").no_feedback_loop])
 

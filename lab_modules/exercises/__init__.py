@@ -49,6 +49,8 @@ class Plot:
     log_x: bool = False                               # logarithmic axes (positive values only)
     log_y: bool = False
     shade: tuple[tuple[float, float], ...] = ()       # x intervals shaded in live plots (e.g. fit windows)
+    log_decades: int | None = None                    # a log y axis spans at most this many decades below its
+                                                      # top (None: the app's default, 4); the data lie above it
 
 
 @dataclass
