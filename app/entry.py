@@ -135,9 +135,18 @@ class Quiet:
                 self.timer.cancel()
                 self.timer = None
 
+    def now(self) -> None:
+        """Call a pending ``action`` at once: the student left the box for another control
+        (viser reports no blur), so a value typed and a button clicked right after are taken in order."""
+        with self.lock:
+            pending, self.timer = self.timer, None
+        if pending is not None:
+            pending.cancel()
+            self.action()
+
 
 def add_box(gui, parameter: Parameter, value, label: str, on_still: Callable[[object], None], hint: str | None):
-    """A text box showing ``value``; ``on_still(box)`` runs (on a timer thread: it should only queue
+    """A text box showing ``value``, and its ``Quiet`` wait; ``on_still(box)`` runs (on a timer thread: it should only queue
     work) once the student stopped typing in it. ``label`` "" puts it beside the slider added just
     before it (``STYLE``). Assignments from the server (the value in use shown again) are not typing."""
     box = gui.add_text(label, shown_value(value), hint=hint)
@@ -147,7 +156,7 @@ def add_box(gui, parameter: Parameter, value, label: str, on_still: Callable[[ob
         if event.client is not None:              # typed in the browser, not set by the lab
             quiet.typed(box.value)
     box.on_update(on_update)
-    return box
+    return box, quiet
 
 
 def show(box, value) -> None:

@@ -165,6 +165,7 @@ class LabSession:
         self.scene_refresh = next(iter(SCENE_REFRESH))   # this tab's choice, kept across exercises
         self.worksheet_beside = False                     # likewise
         self.scene_quiet_until = 0.0                      # perf_counter time before which the 3D view waits
+        self.typing: dict[str, entry.Quiet] = {}          # the boxes' waits for typing to stop (rebuilt per exercise)
         self.thread: threading.Thread | None = None
         self.analysis_thread: threading.Thread | None = None
         self.analysis_request: tuple[int, Exercise, dict] | None = None
@@ -193,8 +194,13 @@ class LabSession:
             self.wakeup.notify()
 
     def _on(self, key, action: Callable[[], None]):
-        """A GUI callback that queues ``action`` under ``key`` (runs on the event loop, returns at once)."""
-        return callback(lambda _event: self.post(key, action))
+        """A GUI callback that queues ``action`` under ``key`` (runs on the event loop, returns at once),
+        after any value still being typed into a box (app/entry.py)."""
+        def queue(_event) -> None:
+            for typing in list(self.typing.values()):
+                typing.now()
+            self.post(key, action)
+        return callback(queue)
 
     def _work(self, exercise: Exercise) -> None:
         try:
@@ -479,6 +485,7 @@ class LabSession:
         self.inputs: dict[str, viser.GuiInputHandle] = {}
         self.refused: dict[str, bool] = {}            # boxes being put back to the value in use (_refuse)
         self.entries: dict[str, viser.GuiInputHandle] = {}   # typed-value boxes (app/entry.py)
+        self.typing = {}
         self.entry_notes: dict[str, viser.GuiMarkdownHandle] = {}   # a refused entry's line, under its box
         groups: dict[str, list[Parameter]] = {}
         for parameter in self.exercise.parameters:
@@ -601,8 +608,8 @@ class LabSession:
         """The box a value is typed into, read once the student stops typing (app/entry.py)."""
         def still(box) -> None:
             self.post(("typed", parameter.name), lambda: self._on_typed(parameter, box))
-        self.entries[parameter.name] = entry.add_box(self.client.gui, parameter, self.values[parameter.name],
-                                                     label, still, hint)
+        self.entries[parameter.name], self.typing[parameter.name] = entry.add_box(
+            self.client.gui, parameter, self.values[parameter.name], label, still, hint)
         self.entry_notes[parameter.name] = self.client.gui.add_markdown("", visible=False)
         return self.entries[parameter.name]
 

@@ -79,3 +79,17 @@ def test_the_box_is_read_once_typing_stopped(monkeypatch):
     quiet.typed("3")
     quiet.cancel()
     assert not done.wait(0.2) and calls == [1, 1]
+
+
+def test_another_control_takes_the_typed_value_first(monkeypatch):
+    """A value typed and a button clicked at once: the click reads the box first (``Quiet.now``)."""
+    monkeypatch.setattr(entry, "QUIET_S", 5.0)
+    calls = []
+    quiet = entry.Quiet(lambda: calls.append("read"))
+    quiet.now()
+    assert calls == []                                    # nothing typed: nothing to read
+    quiet.typed("0,01")
+    quiet.now()
+    assert calls == ["read"]                              # at once, not 5 s later
+    quiet.now()
+    assert calls == ["read"]                              # and once
