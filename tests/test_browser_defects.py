@@ -24,7 +24,7 @@ ANALYSIS_WAIT_S = 5.0             # a slow analysis ("computing …") is checked
 STATUS_JS = """() => [...document.querySelectorAll('p, strong')].filter(e => e.offsetParent !== null)
     .map(e => e.innerText.trim()).filter(t => /^(Running|Paused|Stopped:)/.test(t))[0] || ''"""
 SPEED_JS = """() => ([...document.querySelectorAll('p')].map(e => e.innerText)
-    .find(t => t.startsWith('Simulation speed:')) || '')"""
+    .find(t => t.startsWith('Simulation:')) || '')"""
 
 
 @pytest.fixture(scope="module")
