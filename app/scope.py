@@ -119,8 +119,10 @@ LAYOUT_SERIES = viser.uplot.Series(label="layout", scale=LAYOUT_SCALE, stroke="r
 
 
 def layout(frame: int, n: int) -> np.ndarray:
-    """The layout series' values in frame number ``frame``: 1 or 2, alternately (float32)."""
-    return np.full(n, 1.0 + frame % 2, dtype=np.float32)
+    """The layout series' values in frame number ``frame``: 1 or 2, alternately.  One byte each
+    (viser sends uint8 arrays as such and uPlot reads any typed array): a quarter of a float32
+    column, 0.9 kB less per scope update of the two kalman_noise charts."""
+    return np.full(n, 1 + frame % 2, dtype=np.uint8)
 
 
 #: A style element for the page (``gui.add_html``): the anchor series stays out of the legends.
