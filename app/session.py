@@ -666,12 +666,8 @@ class LabSession:
         except ParameterError as error:
             self._refuse(parameter, entry.refusal(parameter, text, str(error), self.values[parameter.name]))
             return
-        handle = self.inputs.get(parameter.name, box)
-        shown = float(np.log10(value)) if parameter.log else value
-        self._on_input(parameter, shown)
-        if handle is not box and handle.value != shown:
-            self.refused[parameter.name] = True       # the slider follows; its echo changes nothing
-            handle.value = shown
+        self._on_input(parameter, float(np.log10(value)) if parameter.log else value)
+        self._put_slider(parameter, value)
 
     def _on_input(self, parameter: Parameter, shown) -> None:
         value = 10 ** float(shown) if parameter.log else shown
@@ -712,14 +708,17 @@ class LabSession:
         value in use again (issue 11, defect 10)."""
         in_use = self.values[parameter.name]
         self._tell(parameter.name, f"⚠️ {escaped(message)}")
-        box = self.entries.get(parameter.name)
-        entry.show(box, in_use)
+        entry.show(self.entries.get(parameter.name), in_use)
+        if not parameter.choices:
+            self._put_slider(parameter, in_use)
+
+    def _put_slider(self, parameter: Parameter, value) -> None:
+        """Move ``parameter``'s slider (if it has one) to ``value``; its echo changes nothing."""
         handle = self.inputs.get(parameter.name)
-        if handle is not None and handle is not box and not parameter.choices:
-            shown = float(np.log10(in_use)) if parameter.log else in_use
-            if handle.value != shown:
-                self.refused[parameter.name] = True
-                handle.value = shown
+        shown = float(np.log10(value)) if parameter.log else value
+        if handle is not None and handle is not self.entries.get(parameter.name) and handle.value != shown:
+            self.refused[parameter.name] = True
+            handle.value = shown
 
     def _on_upload(self, uploaded) -> None:
         try:
@@ -1001,7 +1000,8 @@ class LabSession:
 
     def _draw(self) -> None:
         """Send the scope charts: only when new samples arrived, as float32, and only the
-        rows ``_scope_rows`` picks (the chart's pixel width, not the buffer's length)."""
+        rows ``_scope_rows`` picks (the chart's pixel width, not the buffer's length).  Part of the
+        frame's one atomic block (``_ticker``)."""
         buffer = self.buffer                          # one reference (replaced, never changed in place)
         if len(buffer) < 2 or buffer[-1, 0] == getattr(self, "drawn_until", None):
             return
@@ -1015,18 +1015,17 @@ class LabSession:
         float32_time = _float32_resolves(np.array((self.window_ms,)), sample_time * 1e3)
         now = time.perf_counter()
         self.frames_drawn = getattr(self, "frames_drawn", 0) + 1
-        with self.client.atomic():                    # one wake-up of the event loop per frame, not per chart
-            for plan, handle, y_range in zip(self.chart_plans, self.charts, self.y_ranges):
-                if self.closed:
-                    return
-                t_ms, t32, ys, low, high = frames.chart_frame(buffer, *plan, sample_time, self.window_ms,
-                                                              SCOPE_BUCKETS, ROUGHNESS_ROWS)
-                y_range.follow(low, high, now)
-                ys[-1, 0::2], ys[-1, 1::2] = y_range.shown() or (0.0, 0.0)   # the anchor series (scope.anchor)
-                data = (t32 if float32_time else t_ms, *ys, scope.layout(self.frames_drawn, len(t_ms)))
-                # Straight to the wire: the handle's ``data`` setter would cast every column to float64.
-                handle._impl.props.data = data
-                handle._queue_update("data", data)
+        for plan, handle, y_range in zip(self.chart_plans, self.charts, self.y_ranges):
+            if self.closed:
+                return
+            t_ms, t32, ys, low, high = frames.chart_frame(buffer, *plan, sample_time, self.window_ms,
+                                                          SCOPE_BUCKETS, ROUGHNESS_ROWS)
+            y_range.follow(low, high, now)
+            ys[-1, 0::2], ys[-1, 1::2] = y_range.shown() or (0.0, 0.0)   # the anchor series (scope.anchor)
+            data = (t32 if float32_time else t_ms, *ys, scope.layout(self.frames_drawn, len(t_ms)))
+            # Straight to the wire: the handle's ``data`` setter would cast every column to float64.
+            handle._impl.props.data = data
+            handle._queue_update("data", data)
 
 
 def _chart_plan(chart: Chart, columns: dict[str, int]) -> tuple:
