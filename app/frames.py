@@ -175,14 +175,14 @@ def chart_frame(buffer, key_columns, value_columns, scales, band_columns, band_s
                 sample_time_s, window_ms, buckets, roughness_rows):
     """One chart's frame from the scope buffer: (time axis [ms before the newest sample]
     starting at −``window_ms``, the same as float32, float32 rows (+3σ, −3σ if ``band_columns`` = (centre, σ)
-    is not (-1, -1), then every series × its scale, then one spare row for the range
-    anchor), lowest and highest finite value drawn (inf, −inf if none))."""
+    is not (-1, -1), then every series × its scale), lowest and highest finite value drawn
+    (inf, −inf if none))."""
     rows = scope_rows(buffer, key_columns, sample_time_s, buckets, roughness_rows)
     last_time = buffer[rows[-1], 0]
     pad = 1 if (buffer[rows[0], 0] - last_time) * 1e3 > -window_ms + 1e-9 else 0
     m = len(rows) + pad
     band = 2 if band_columns[0] >= 0 else 0
-    ys = np.empty((band + len(value_columns) + 1, m), dtype=np.float32)
+    ys = np.empty((band + len(value_columns), m), dtype=np.float32)
     t_ms = np.empty(m)
     low, high = np.inf, -np.inf
     for i in range(m):

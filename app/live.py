@@ -42,9 +42,9 @@ def _series(plot: Plot) -> tuple[viser.uplot.Series, ...]:
 
 
 def chart_data(plot: Plot, range_: tuple[float, float] | None, frame: int = 0) -> tuple[np.ndarray, ...]:
-    """The plot's columns as float32: x, the shade band's two series (if any), the series, the
-    anchor (if no shade), the layout series of frame number ``frame`` (``scope.layout``);
-    ``range_`` is the y range to hold (None: not yet known)."""
+    """The plot's columns: as float32 x, the shade band's two series (if any), the series, the
+    anchor's two points (if no shade; ``scope.anchor``), then the layout series' one byte of frame
+    number ``frame`` (``scope.layout``); ``range_`` is the y range to hold (None: not yet known)."""
     x = np.asarray(plot.x, dtype=float)
     low, high = range_ if range_ is not None else (0.0, 0.0)
     columns = [x.astype(np.float32)]
@@ -55,9 +55,8 @@ def chart_data(plot: Plot, range_: tuple[float, float] | None, frame: int = 0) -
         columns += [np.where(inside, high, low), np.full(len(x), low)]
     columns += [np.asarray(y, dtype=float) for _, y, _ in plot.series]
     if not plot.shade:
-        columns.append(scope.anchor(range_, len(x)))
-    columns.append(scope.layout(frame, len(x)))
-    return tuple(np.asarray(c, dtype=np.float32) for c in columns)
+        columns.append(scope.anchor(range_))
+    return (*(np.asarray(c, dtype=np.float32) for c in columns), scope.layout(frame))
 
 
 def _options(plot: Plot) -> dict:
@@ -75,8 +74,11 @@ class LivePlots:
         plots = exercise.live_plots(simulation)
         self.ranges = [scope.StickyRange() for _ in plots]
         self.shown = [(p.title, float(p.x[0]), float(p.x[-1])) for p in plots]
-        self.handles = [gui.add_uplot(chart_data(plot, None), _series(plot), **_options(plot), aspect=LIVE_ASPECT)
-                        for plot in plots]
+        self.handles = []
+        for plot in plots:
+            series = _series(plot)
+            self.handles.append(gui.add_uplot(scope.placeholder(float(plot.x[0]), float(plot.x[-1]), len(series) - 1),
+                                              series, **_options(plot), aspect=LIVE_ASPECT))
         self.next_draw = 0.0
         self.drawn_until = None
         self.frames = 0

@@ -118,21 +118,30 @@ LAYOUT_SERIES = viser.uplot.Series(label="layout", scale=LAYOUT_SCALE, stroke="r
                                    points=viser.uplot.Series_Points(show=False), **{"class": ANCHOR_CLASS})
 
 
-def layout(frame: int, n: int) -> np.ndarray:
-    """The layout series' values in frame number ``frame``: 1 or 2, alternately.  One byte each
-    (viser sends uint8 arrays as such and uPlot reads any typed array): a quarter of a float32
-    column, 0.9 kB less per scope update of the two kalman_noise charts."""
-    return np.full(n, 1 + frame % 2, dtype=np.uint8)
+def layout(frame: int) -> np.ndarray:
+    """The layout series' one value in frame number ``frame``: 1 or 2, alternately, as one byte.
+    A series shorter than the x values is allowed on the wire: uPlot reads the missing points
+    as gaps (``undefined == null``), skips them when it ranges a scale and draws nothing there,
+    so a hidden series costs one or two points, not a column (issue 13: 1.5 kB less per
+    kalman_noise scope update than full columns)."""
+    return np.array([1 + frame % 2], dtype=np.uint8)
 
 
 #: A style element for the page (``gui.add_html``): the anchor series stays out of the legends.
 LEGEND_STYLE = f"<style>.u-legend .{ANCHOR_CLASS} {{ display: none; }}</style>"
 
 
-def anchor(y_range: tuple[float, float] | None, n: int) -> np.ndarray:
-    """The anchor series' values: alternately the range's ends (zeros before the first range)."""
+def anchor(y_range: tuple[float, float] | None) -> np.ndarray:
+    """The anchor series' two points: the range's ends (zeros before the first range); the
+    points after them are gaps (see ``layout``)."""
     low, high = y_range if y_range is not None else (0.0, 0.0)
-    return np.where(np.arange(n) % 2 == 1, high, low)
+    return np.array((low, high), dtype=np.float32)
+
+
+def placeholder(x_first: float, x_last: float, series: int) -> tuple[np.ndarray, ...]:
+    """A chart's data before its first frame: two points over the x extent the chart keeps, and
+    zeros for each of its ``series`` y series (viser makes a chart only from equal columns)."""
+    return (np.array([x_first, x_last]),) + tuple(np.zeros(2) for _ in range(series))
 
 
 def chart_options(x_label: str, y_label: str) -> dict:

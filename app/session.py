@@ -648,9 +648,8 @@ class LabSession:
         series += [viser.uplot.Series(label=s.label, stroke=s.color, width=1.5) for s in chart.series]
         series += [scope.ANCHOR_SERIES, scope.LAYOUT_SERIES]   # y range held still; axes laid out each frame
         bands = (viser.uplot.Band(series=(1, 2), fill="rgba(214,39,40,0.12)"),) if chart.band else None
-        empty = (np.array([-self.window_ms, 0.0]),) + tuple(np.zeros(2) for _ in series[1:])
         return self.client.gui.add_uplot(
-            empty, tuple(series), title=f"{chart.title} [{chart.unit}]", bands=bands,
+            scope.placeholder(-self.window_ms, 0.0, len(series) - 1), tuple(series), title=f"{chart.title} [{chart.unit}]", bands=bands,
             **scope.chart_options("time before now [ms]", f"[{chart.unit}]"),
             scales={"x": viser.uplot.Scale(time=False)}, aspect=SCOPE_ASPECT)
 
@@ -1021,8 +1020,7 @@ class LabSession:
             t_ms, t32, ys, low, high = frames.chart_frame(buffer, *plan, sample_time, self.window_ms,
                                                           SCOPE_BUCKETS, ROUGHNESS_ROWS)
             y_range.follow(low, high, now)
-            ys[-1, 0::2], ys[-1, 1::2] = y_range.shown() or (0.0, 0.0)   # the anchor series (scope.anchor)
-            data = (t32 if float32_time else t_ms, *ys, scope.layout(self.frames_drawn, len(t_ms)))
+            data = (t32 if float32_time else t_ms, *ys, scope.anchor(y_range.shown()), scope.layout(self.frames_drawn))
             # Straight to the wire: the handle's ``data`` setter would cast every column to float64.
             handle._impl.props.data = data
             handle._queue_update("data", data)

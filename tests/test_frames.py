@@ -41,7 +41,7 @@ def test_compiled_chart_frame_is_the_reference_frame(first, window_ms):
     got_t, t32, ys, low, high = frames.chart_frame(buffer, np.array(columns), np.array(columns), np.array(scales),
                                               np.array([1, 3]), 1e6, T, window_ms, SCOPE_BUCKETS, ROUGHNESS_ROWS)
     assert np.array_equal(got_t, t_ms) and got_t[0] == -window_ms and np.array_equal(t32, t_ms.astype(np.float32))
-    assert ys.dtype == np.float32 and ys.shape == (5, len(t_ms))      # band, series, the anchor's spare row
+    assert ys.dtype == np.float32 and ys.shape == (4, len(t_ms))      # band, series
     for row, want in zip(ys, expected):
         assert np.array_equal(row, want.astype(np.float32))
     assert (low, high) == (min(e.min() for e in expected), max(e.max() for e in expected))
@@ -51,7 +51,7 @@ def test_chart_frame_without_band_or_finite_values():
     buffer = _buffer(0, 300)
     t_ms, _, ys, low, high = frames.chart_frame(buffer, np.array([4]), np.array([4]), np.array([1.0]),
                                              np.array([-1, -1]), 1.0, T, 15.0, SCOPE_BUCKETS, ROUGHNESS_ROWS)
-    assert ys.shape == (2, len(t_ms)) and np.isnan(ys[0]).all() and low > high
+    assert ys.shape == (1, len(t_ms)) and np.isnan(ys[0]).all() and low > high
 
 
 def test_clock_steps_each_ticker_at_the_frame_rate_until_it_finishes():

@@ -163,15 +163,17 @@ def test_live_ripple_zoom_of_the_running_simulation():
 
 
 def test_live_plot_bandwidth_and_rate():
-    """self_sensing's live plots: at most 17 kB of float32 per update (16 columns of 256 points,
-    one of them ``scope.LAYOUT_SERIES``) and 10 updates/s, so ≤ 68 kB/s per tab at the app's
+    """self_sensing's live plots: at most 17 kB of float32 per update (15 columns of 256 points
+    and the one byte of ``scope.LAYOUT_SERIES``) and 10 updates/s, so ≤ 68 kB/s per tab at the app's
     4 updates/s (the scope of this exercise sends ~370 kB/s)."""
     exercise = get("self_sensing")
     simulation = exercise.simulation(exercise.resolve({}))
     simulation.advance(10)
     size = sum(column.nbytes for plot in exercise.live_plots(simulation)
                for column in chart_data(plot, (0.0, 1.0)))
-    assert all(c.dtype == np.float32 for plot in exercise.live_plots(simulation) for c in chart_data(plot, None))
+    for plot in exercise.live_plots(simulation):
+        *columns, layout = chart_data(plot, None)
+        assert all(c.dtype == np.float32 for c in columns) and layout.dtype == np.uint8 and len(layout) == 1
     assert LIVE_PERIOD_S >= 0.1
     assert size <= 17_000 and size / LIVE_PERIOD_S <= 68_000, size
 
