@@ -22,6 +22,7 @@ import contextlib
 import json
 import os
 import random
+import re
 import socket
 import statistics
 import subprocess
@@ -53,6 +54,9 @@ SETTLE_MAX_S = 90.0                           # ... and until every tab streams 
 SLIDER_LABEL = "Position sensor noise"
 SLIDER_VALUES = (1.33, 2.0)
 WORKER_HEADER = "X-Lab-Worker"                # set by the generated HAProxy configuration
+#: An analysis readout of kalman_noise that a move of the position-noise slider changes: the time from a
+#: move to its new value in the tab is the slider-to-readout latency (the scope-window rows change anyway)
+READOUT_ROW = re.compile(r"RMS displacement, measured feedback \| *([^|]+?) *\|")
 
 
 def scope_titles(exercise_name: str) -> tuple[str, ...]:
@@ -101,6 +105,9 @@ class Tab:
     closed: str | None = None                 # why the connection ended
     scope_uuid: str | None = None
     answers: list = field(default_factory=list)               # replies due to the lab's requests
+    moved_at: float | None = None             # the newest slider move whose readout has not come yet
+    readout: str | None = None                # the newest value of READOUT_ROW
+    latencies: list[tuple[float, float]] = field(default_factory=list)   # (arrival, seconds since the move)
 
     def _kind(self, message: dict) -> str:
         kind = message["type"]
@@ -135,12 +142,27 @@ class Tab:
             if (message["type"] == "GuiUpdateMessage" and message["uuid"] == self.scope_uuid
                     and "data" in message["updates"]):
                 self.scope_times.append(now)
+            self._read_readout(message, now)
             if self.breakdown:
                 share = compressed * sizes[index] / total if total else 0.0
                 self.kind_bytes[kind] += share + _binary_bytes(message, lengths)
                 self.kind_count[kind] += 1
         if self.breakdown:
             self.kind_bytes["frame headers and padding"] += len(frame) - compressed - sum(lengths)
+
+    def _read_readout(self, message: dict, now: float) -> None:
+        content = (message.get("updates") or message.get("props") or {}).get("_markdown")   # viser's name
+        found = READOUT_ROW.search(content) if isinstance(content, str) else None
+        if found is None or found.group(1) == self.readout:
+            return
+        if self.moved_at is not None and self.readout is not None:
+            self.latencies.append((now, now - self.moved_at))
+            self.moved_at = None
+        self.readout = found.group(1)
+
+    def latencies_in(self, start: float, end: float) -> list[float]:
+        """Slider-to-readout latencies [s] of the readouts that arrived in [start, end)."""
+        return [latency for arrival, latency in self.latencies if start <= arrival < end]
 
     async def _inputs(self, connection, stop: asyncio.Event) -> None:
         """A camera message at once and then, like a student, every few seconds a camera
@@ -158,6 +180,7 @@ class Tab:
                 move = {"type": "GuiUpdateMessage", "uuid": self.slider,
                         "updates": {"value": SLIDER_VALUES[turn // self.slider_every % 2]}}
                 await connection.send(msgspec.msgpack.encode(move))
+                self.moved_at = time.perf_counter()
             turn += 1
             with contextlib.suppress(asyncio.TimeoutError):
                 await asyncio.wait_for(stop.wait(), CAMERA_PERIOD_S * random.uniform(0.8, 1.2))
@@ -281,6 +304,7 @@ class Step:
     connected: int
     updates: int                  # scope updates received by all tabs in the window
     window_s: float
+    readout_latencies_s: list[float] = field(default_factory=list)   # slider move -> new readout, all tabs
 
     @property
     def ok(self) -> bool:
@@ -297,6 +321,10 @@ class Step:
                 "server_core_percent_per_tab_at_25_per_s": round(
                     100 * 25 * self.server_cores * self.window_s / max(self.updates, 1), 2),
                 "bench_client_cores": round(self.client_cores, 3),
+                "slider_moves_answered": len(self.readout_latencies_s),
+                "readout_latency_s_median": _rounded(statistics.median(self.readout_latencies_s)
+                                                     if self.readout_latencies_s else None),
+                "readout_latency_s_max": _rounded(max(self.readout_latencies_s, default=None)),
                 "connected": self.connected, "ok": self.ok}
 
 
@@ -327,7 +355,8 @@ async def _measure(url: str, steps: list[int], window_s: float, server_pid: int,
             step = Step(clients, min(rates), statistics.median(rates), statistics.median(rates_bytes),
                         max(rates_bytes), server_cpu / (end - start), own_cpu / (end - start),
                         sum(t.connected and t.closed is None for t in tabs),
-                        sum(round(r * (end - start)) for r in rates), end - start)
+                        sum(round(r * (end - start)) for r in rates), end - start,
+                        [x for t in tabs for x in t.latencies_in(start, end)])
             results.append(step)
             report(step)
             if not step.ok and not all_steps:
@@ -351,6 +380,10 @@ async def _settle(tabs: list[Tab]) -> None:
             break
         await asyncio.sleep(0.5)
     await asyncio.sleep(min(SETTLE_S, max(0.0, SETTLE_MAX_S - (time.perf_counter() - began))))
+
+
+def _rounded(seconds: float | None) -> float | None:
+    return None if seconds is None else round(seconds, 3)
 
 
 def ramp(clients: int, steps: int) -> list[int]:
@@ -400,6 +433,9 @@ def main(clients: int, workers: int, steps: int, window_s: float, exercise: str,
                   f"server {r['server_cores']:.2f} cores = {r['server_core_percent_per_tab']:.2f} % of a core "
                   f"per tab ({r['server_cpu_ms_per_update']:.2f} ms per update = "
                   f"{r['server_core_percent_per_tab_at_25_per_s']:.2f} % at 25/s); bench clients {r['bench_client_cores']:.2f} cores"
+                  + (f"; slider move to readout: median {r['readout_latency_s_median']:.2f} s, "
+                     f"max {r['readout_latency_s_max']:.2f} s ({r['slider_moves_answered']} moves)"
+                     if r["slider_moves_answered"] else "")
                   + ("" if step.ok else "  <- below target"), flush=True)
 
     if not as_json:

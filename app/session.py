@@ -15,6 +15,7 @@ while its lab is still being built stops building and starts no threads.
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import re
 import sys
@@ -33,6 +34,7 @@ from app.actions import ActionPanel
 from app.live import LivePlots, SpeedMeter
 from app.store import Store, StoreError
 from app.traffic import callback
+from app.turns import LoopLag, Turns
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, registry
 from lab_modules.parameters import Parameter, ParameterError
 from lab_modules.scenes.bearing import CANVAS_PX
@@ -74,6 +76,12 @@ TOKEN_RETRY_S = 1.0               # a wrong token waits this long before the nex
 #: updates) waits, with its requests coalescing, and the other tabs keep their share.
 TAB_CPU_SHARE = 0.15
 TAB_CPU_BURST_S = 1.0
+
+
+#: The process's analyses take turns, after streaming (app/turns.py): every tab's scope keeps its rate.
+#: The server starts ``EVENT_LOOP_LAG`` on viser's event loop.
+EVENT_LOOP_LAG = LoopLag()
+ANALYSIS_TURNS = Turns(yield_to=lambda: frames.CLOCK.behind() or EVENT_LOOP_LAG.behind())
 
 
 class CpuBudget:
@@ -136,9 +144,14 @@ def _format(value: float | str) -> str:
     return text
 
 
-def _analyses(result: Analysis | Iterator[Analysis]) -> Iterator[Analysis]:
-    """An exercise's ``analyse`` returns one ``Analysis`` or yields a quick one, then fuller ones."""
-    return iter((result,)) if isinstance(result, Analysis) else result
+def _analyses(exercise: Exercise, values: dict) -> Iterator[Analysis]:
+    """The results of ``exercise.analyse(values)``, computed as they are asked for: ``analyse``
+    returns one ``Analysis`` or yields a quick one, then fuller ones."""
+    result = exercise.analyse(values)
+    if isinstance(result, Analysis):
+        yield result
+    else:
+        yield from result
 
 
 class LabSession:
@@ -510,7 +523,7 @@ class LabSession:
                 self.saved_note = gui.add_markdown("")
             self._show_codes()
 
-        first = next(_analyses(self.exercise.analyse(dict(self.values))))
+        first = next(_analyses(self.exercise, dict(self.values)))
         self.shown_margins = margins.margin_view(self.exercise, dict(self.values))
         first = margins.with_margins(first, self.shown_margins)
         if getattr(self, "panel", None) is None:      # docked once per tab (see app/layout.py)
@@ -785,21 +798,24 @@ class LabSession:
                 (generation, exercise, values), self.analysis_request = self.analysis_request, None
             spent = time.thread_time()
             try:
-                last = None
-                for result in _analyses(exercise.analyse(values)):
-                    shown = margins.with_margins(result, self.shown_margins)   # the last margins until ...
-                    if self.analysis_request is not None or not self._show(generation, shown):
-                        break
-                    last = result
+                results, last = _analyses(exercise, values), None
+                while True:                               # the quick first result (the readouts) at once,
+                    with ANALYSIS_TURNS.turn() if last is not None else contextlib.nullcontext():   # then turns
+                        result = next(results, None)
+                        if result is None:                # ... the new margins are ready (they take longer)
+                            if last is not None and self.analysis_request is None:
+                                fresh = margins.margin_view(exercise, values)
+                                with self.gui_lock:
+                                    if self._current(generation):
+                                        self.shown_margins = fresh
+                                self._show(generation, margins.with_margins(last, fresh))
+                            break
+                        shown = margins.with_margins(result, self.shown_margins)   # the last margins until ...
+                        if self.analysis_request is not None or not self._show(generation, shown):
+                            break
+                        last = result
                     self._pause(self.budget.charge(time.thread_time() - spent), self.analysis_wakeup)
                     spent = time.thread_time()
-                else:                                     # ... the new ones are ready (they take longer)
-                    if last is not None and self.analysis_request is None:
-                        fresh = margins.margin_view(exercise, values)
-                        with self.gui_lock:
-                            if self._current(generation):
-                                self.shown_margins = fresh
-                        self._show(generation, margins.with_margins(last, fresh))
             except (ValueError, ArithmeticError) as error:   # incl. ParameterError, LinAlgError: the tab's
                 traceback.print_exc()                         # analyses go on at the next slider move
                 with self.gui_lock:

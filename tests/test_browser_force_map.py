@@ -86,7 +86,7 @@ def test_analysis_tab_shows_the_plots_of_the_full_analysis(open_tab):
     tab.open_panel_tab("Analysis")
     exercise = get("stiffness_map")
     values = exercise.resolve()
-    *_, full = _analyses(exercise.analyse(values))            # the last result: every plot
+    *_, full = _analyses(exercise, values)            # the last result: every plot
     expected = len(margins.with_margins(full, margins.margin_view(exercise, values)).plots)
     deadline = time.time() + 60
     titles = page.evaluate(TITLES_JS)

@@ -1,0 +1,106 @@
+"""Analyses take turns after streaming (app/turns.py), and the bench reads the slider-to-readout latency."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import time
+
+import pytest
+
+from app import turns
+from app.load_bench import Tab
+from app.turns import LoopLag, Turns
+
+
+def _queue_up(shared: Turns, names: list[str], order: list[str], hold_s: float = 0.02) -> list[threading.Thread]:
+    """Threads asking for the turn in the order of ``names`` (each after the previous one waits)."""
+    threads = []
+    for name in names:
+        def work(name=name):
+            with shared.turn():
+                order.append(name)
+                time.sleep(hold_s)
+        thread = threading.Thread(target=work)
+        thread.start()
+        deadline = time.perf_counter() + 2
+        while len(shared._waiting) <= len(threads) and time.perf_counter() < deadline:   # this one waits too
+            time.sleep(0.001)
+        threads.append(thread)
+    return threads
+
+
+def test_the_turn_goes_to_whoever_asked_first():
+    shared, order = Turns(), []
+    with shared.turn():                                # held: everyone queues behind it
+        threads = _queue_up(shared, ["a", "b", "c", "d", "e"], order)
+        assert order == []                             # nobody runs while it is held
+    for thread in threads:
+        thread.join(5)
+    assert order == ["a", "b", "c", "d", "e"]
+    with shared.turn():                                # free again: taken at once
+        pass
+
+
+def test_an_error_inside_a_turn_hands_it_on():
+    shared = Turns()
+    with pytest.raises(RuntimeError), shared.turn():
+        raise RuntimeError("an analysis failed")
+    done = threading.Event()
+
+    def next_one():
+        with shared.turn():
+            done.set()
+    threading.Thread(target=next_one).start()
+    assert done.wait(2)
+
+
+def test_a_turn_waits_while_streaming_is_behind_but_not_for_ever(monkeypatch):
+    behind = {"until": time.perf_counter() + 0.15}
+    shared = Turns(yield_to=lambda: time.perf_counter() < behind["until"])
+    started = time.perf_counter()
+    with shared.turn():
+        waited = time.perf_counter() - started
+    assert 0.14 <= waited < 0.5                        # until streaming caught up
+    monkeypatch.setattr(turns, "MAX_YIELD_S", 0.2)
+    always = Turns(yield_to=lambda: True)
+    started = time.perf_counter()
+    with always.turn():
+        waited = time.perf_counter() - started
+    assert 0.19 <= waited < 0.6                        # a server that never catches up still analyses
+
+
+def test_loop_lag_sees_a_blocked_event_loop():
+    loop = asyncio.new_event_loop()
+    thread = threading.Thread(target=loop.run_forever, daemon=True)
+    thread.start()
+    try:
+        lag = LoopLag()
+        lag.watch(loop)
+        time.sleep(0.2)
+        assert not lag.behind(), lag.lag_s             # an idle loop fires its timers on time
+        loop.call_soon_threadsafe(time.sleep, 0.1)     # a callback that holds the loop for 100 ms
+        deadline = time.perf_counter() + 2
+        while not lag.behind() and time.perf_counter() < deadline:
+            time.sleep(0.005)
+        assert lag.lag_s >= 0.05
+    finally:
+        loop.call_soon_threadsafe(loop.stop)
+        thread.join(2)
+
+
+def _readouts(value: str) -> dict:
+    return {"type": "GuiUpdateMessage", "uuid": "r",
+            "updates": {"_markdown": f"| quantity | value | unit |\n|---|---:|---|\n"
+                                     f"| RMS displacement, measured feedback | {value} | µm |\n"}}
+
+
+def test_the_bench_times_a_slider_move_to_its_new_readout():
+    tab = Tab("ws://unused", ("Rotor position [µm]",))
+    tab._read_readout(_readouts("0.47"), now=1.0)      # the first readouts: nothing was moved
+    tab.moved_at = 2.0
+    tab._read_readout(_readouts("0.47"), now=2.1)      # the scope-window rows refreshed: not the answer
+    tab._read_readout(_readouts("0.61"), now=2.3)
+    tab._read_readout(_readouts("0.47"), now=2.5)      # no move pending: no latency
+    assert tab.latencies == [(2.3, pytest.approx(0.3))]
+    assert tab.latencies_in(2.0, 3.0) == [pytest.approx(0.3)] and tab.latencies_in(0.0, 2.0) == []
