@@ -662,7 +662,8 @@ class LabSession:
         series += [scope.ANCHOR_SERIES, scope.LAYOUT_SERIES]   # y range held still; axes laid out each frame
         bands = (viser.uplot.Band(series=(1, 2), fill="rgba(214,39,40,0.12)"),) if chart.band else None
         return self.client.gui.add_uplot(
-            scope.placeholder(-self.window_ms, 0.0, len(series) - 1), tuple(series), title=f"{chart.title} [{chart.unit}]", bands=bands,
+            scope.placeholder(-self.window_ms, 0.0, len(series) - 1), tuple(series),
+            title=f"{chart.title} [{chart.unit}]", bands=bands,
             **scope.chart_options("time before now [ms]", f"[{chart.unit}]"),
             scales={"x": viser.uplot.Scale(time=False)}, aspect=SCOPE_ASPECT)
 
@@ -798,22 +799,11 @@ class LabSession:
                 (generation, exercise, values), self.analysis_request = self.analysis_request, None
             spent = time.thread_time()
             try:
-                results, last = _analyses(exercise, values), None
-                while True:                               # the quick first result (the readouts) at once,
-                    with ANALYSIS_TURNS.turn() if last is not None else contextlib.nullcontext():   # then turns
-                        result = next(results, None)
-                        if result is None:                # ... the new margins are ready (they take longer)
-                            if last is not None and self.analysis_request is None:
-                                fresh = margins.margin_view(exercise, values)
-                                with self.gui_lock:
-                                    if self._current(generation):
-                                        self.shown_margins = fresh
-                                self._show(generation, margins.with_margins(last, fresh))
-                            break
-                        shown = margins.with_margins(result, self.shown_margins)   # the last margins until ...
-                        if self.analysis_request is not None or not self._show(generation, shown):
-                            break
-                        last = result
+                results, last, more = _analyses(exercise, values), None, True
+                while more:
+                    # the quick first result (the readouts) at once; the fuller ones take turns after streaming
+                    with ANALYSIS_TURNS.turn() if last is not None else contextlib.nullcontext():
+                        last, more = self._show_next(generation, exercise, values, results, last)
                     self._pause(self.budget.charge(time.thread_time() - spent), self.analysis_wakeup)
                     spent = time.thread_time()
             except (ValueError, ArithmeticError) as error:   # incl. ParameterError, LinAlgError: the tab's
@@ -822,6 +812,24 @@ class LabSession:
                     if self._current(generation):
                         self.shown_analysis = None        # the message stays until an analysis succeeds
                         self.readouts.content = f"⚠️ The analysis failed at these settings: {error}"
+
+    def _show_next(self, generation: int, exercise: Exercise, values: dict, results: Iterator[Analysis],
+                   last: Analysis | None) -> tuple[Analysis | None, bool]:
+        """Show the analysis's next result, or after its last one the last with fresh margins;
+        returns the newest result shown and whether to go on."""
+        result = next(results, None)
+        if result is None:                            # ... the new margins are ready (they take longer)
+            if last is not None and self.analysis_request is None:
+                fresh = margins.margin_view(exercise, values)
+                with self.gui_lock:
+                    if self._current(generation):
+                        self.shown_margins = fresh
+                self._show(generation, margins.with_margins(last, fresh))
+            return last, False
+        shown = margins.with_margins(result, self.shown_margins)   # the last margins until ...
+        if self.analysis_request is not None or not self._show(generation, shown):
+            return last, False
+        return result, True
 
     def _update_plots(self, plots) -> None:
         """The Analysis tab's charts show ``plots`` (call holding ``gui_lock``).  A later result of
@@ -1036,7 +1044,8 @@ class LabSession:
             t_ms, t32, ys, low, high = frames.chart_frame(buffer, *plan, sample_time, self.window_ms,
                                                           SCOPE_BUCKETS, ROUGHNESS_ROWS)
             y_range.follow(low, high, now)
-            data = (t32 if float32_time else t_ms, *ys, scope.anchor(y_range.shown()), scope.layout(self.frames_drawn))
+            data = (t32 if float32_time else t_ms, *ys, scope.anchor(y_range.shown()),
+                    scope.layout(self.frames_drawn))
             # Straight to the wire: the handle's ``data`` setter would cast every column to float64.
             handle._impl.props.data = data
             handle._queue_update("data", data)
