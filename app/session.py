@@ -15,7 +15,6 @@ while its lab is still being built stops building and starts no threads.
 
 from __future__ import annotations
 
-import contextlib
 import itertools
 import re
 import sys
@@ -801,9 +800,12 @@ class LabSession:
             try:
                 results, last, more = _analyses(exercise, values), None, True
                 while more:
-                    # the quick first result (the readouts) at once; the fuller ones take turns after streaming
-                    with ANALYSIS_TURNS.turn() if last is not None else contextlib.nullcontext():
+                    if last is None:                      # the quick first result (the readouts) at once
                         last, more = self._show_next(generation, exercise, values, results, last)
+                    else:                                 # the fuller ones take turns after streaming
+                        with ANALYSIS_TURNS.turn(abandon=self._analysis_superseded) as held:
+                            last, more = (self._show_next(generation, exercise, values, results, last)
+                                          if held else (last, False))
                     self._pause(self.budget.charge(time.thread_time() - spent), self.analysis_wakeup)
                     spent = time.thread_time()
             except (ValueError, ArithmeticError) as error:   # incl. ParameterError, LinAlgError: the tab's
@@ -812,6 +814,9 @@ class LabSession:
                     if self._current(generation):
                         self.shown_analysis = None        # the message stays until an analysis succeeds
                         self.readouts.content = f"⚠️ The analysis failed at these settings: {error}"
+
+    def _analysis_superseded(self) -> bool:
+        return self.analysis_request is not None or self.closed
 
     def _show_next(self, generation: int, exercise: Exercise, values: dict, results: Iterator[Analysis],
                    last: Analysis | None) -> tuple[Analysis | None, bool]:

@@ -24,6 +24,8 @@ a round late, or viser's event loop, which encodes and sends every tab's
 messages, fires its timers late: then it merges a chart's queued updates and
 the tabs get fewer), the thread whose turn it is waits (at most
 ``MAX_YIELD_S`` per step, so analyses always move on) and streaming catches up.
+A tab that asks for a newer analysis leaves the queue (``abandon``): its thread
+answers the new request with its quick result at once, not after a turn.
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ from collections.abc import Callable, Iterator
 
 YIELD_STEP_S = 0.005             # a turn's holder looks again this often whether the frames caught up ...
 MAX_YIELD_S = 1.0                # ... for at most this long
+ABANDON_CHECK_S = 0.02           # a thread waiting for its turn looks this often whether it is still wanted
 LAG_PROBE_S = 0.02               # the event loop's timer is probed this often ...
 MAX_LOOP_LAG_S = 0.015           # ... and runs behind when it fires this much late (a frame is 40 ms)
 
@@ -72,24 +75,38 @@ class Turns:
         self._held = False
 
     @contextlib.contextmanager
-    def turn(self) -> Iterator[None]:
-        """Hold the turn for the ``with`` block."""
-        with self._lock:
-            mine = None
-            if self._held:
-                mine = threading.Event()
-                self._waiting.append(mine)
-            self._held = True
-        if mine is not None:
-            mine.wait()                               # handed on by the holder, in order
+    def turn(self, abandon: Callable[[], bool] = lambda: False) -> Iterator[bool]:
+        """Hold the turn for the ``with ... as held`` block.  ``held`` is False when ``abandon()``
+        became True first (the tab asked for a newer analysis): then the block does nothing, and
+        the tab's thread is free for its new request at once instead of after a turn."""
+        if not self._queue(abandon):
+            yield False
+            return
         try:
             give_up = time.perf_counter() + MAX_YIELD_S
-            while self.yield_to() and time.perf_counter() < give_up:
+            while self.yield_to() and not abandon() and time.perf_counter() < give_up:
                 time.sleep(YIELD_STEP_S)
-            yield
+            yield not abandon()
         finally:
             with self._lock:
                 if self._waiting:
                     self._waiting.popleft().set()     # still held: it changes hands
                 else:
                     self._held = False
+
+    def _queue(self, abandon: Callable[[], bool]) -> bool:
+        """Wait for the turn, in order; False (out of the queue) if ``abandon()`` came first."""
+        with self._lock:
+            if not self._held:
+                self._held = True
+                return True
+            mine = threading.Event()
+            self._waiting.append(mine)
+        while not mine.wait(ABANDON_CHECK_S):         # handed on by the holder
+            if abandon():
+                with self._lock:
+                    if mine.is_set():                 # handed on just now: it is ours
+                        return True
+                    self._waiting.remove(mine)
+                    return False
+        return True

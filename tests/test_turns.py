@@ -55,6 +55,34 @@ def test_an_error_inside_a_turn_hands_it_on():
     assert done.wait(2)
 
 
+def test_a_waiting_thread_whose_work_is_moot_leaves_the_queue_at_once():
+    shared, order, moot = Turns(), [], threading.Event()
+    outcome = {}
+
+    def superseded():
+        with shared.turn(abandon=moot.is_set) as held:
+            outcome["held"] = held
+            if held:
+                order.append("superseded")
+
+    with shared.turn():
+        first = _queue_up(shared, ["a"], order)
+        waiting = threading.Thread(target=superseded)
+        waiting.start()
+        deadline = time.perf_counter() + 2
+        while len(shared._waiting) < 2 and time.perf_counter() < deadline:
+            time.sleep(0.001)
+        later = _queue_up(shared, ["b"], order)
+        started = time.perf_counter()
+        moot.set()                                     # the tab asked for a newer analysis
+        waiting.join(2)
+        assert time.perf_counter() - started < 0.2 and outcome == {"held": False}
+        assert len(shared._waiting) == 2               # a and b still wait, in order
+    for thread in first + later:
+        thread.join(5)
+    assert order == ["a", "b"]
+
+
 def test_a_turn_waits_while_streaming_is_behind_but_not_for_ever(monkeypatch):
     behind = {"until": time.perf_counter() + 0.15}
     shared = Turns(yield_to=lambda: time.perf_counter() < behind["until"])
