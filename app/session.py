@@ -182,6 +182,7 @@ class LabSession:
         self.analysis_thread: threading.Thread | None = None
         self.analysis_request: tuple[int, Exercise, dict] | None = None
         self.analysis_wakeup = threading.Condition()
+        self.turn_wake = threading.Event()           # this tab's place in line for an analysis turn (app/turns.py)
         self.events: dict[object, Callable[[], None]] = {}   # control -> what to do (newest wins)
         self.wakeup = threading.Condition()
         self.autosave_code: str | None = None
@@ -399,6 +400,7 @@ class LabSession:
             self.wakeup.notify()
         with self.analysis_wakeup:
             self.analysis_wakeup.notify()
+        self.turn_wake.set()
 
     def report(self, text: str) -> None:
         """A one-line message for the tab from outside (e.g. a message the server refused)."""
@@ -785,6 +787,7 @@ class LabSession:
         with self.analysis_wakeup:
             self.analysis_request = (self.generation, self.exercise, dict(self.values))
             self.analysis_wakeup.notify()
+        self.turn_wake.set()                          # an analysis waiting for its turn is moot now
 
     def _analysis_worker(self) -> None:
         """One analysis at a time per tab, always of the newest values: an analysis
@@ -803,7 +806,7 @@ class LabSession:
                     if last is None:                      # the quick first result (the readouts) at once
                         last, more = self._show_next(generation, exercise, values, results, last)
                     else:                                 # the fuller ones take turns after streaming
-                        with ANALYSIS_TURNS.turn(abandon=self._analysis_superseded) as held:
+                        with ANALYSIS_TURNS.turn(self.turn_wake, abandon=self._analysis_superseded) as held:
                             last, more = (self._show_next(generation, exercise, values, results, last)
                                           if held else (last, False))
                     self._pause(self.budget.charge(time.thread_time() - spent), self.analysis_wakeup)

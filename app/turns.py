@@ -39,7 +39,6 @@ from collections.abc import Callable, Iterator
 
 YIELD_STEP_S = 0.005             # a turn's holder looks again this often whether the frames caught up ...
 MAX_YIELD_S = 1.0                # ... for at most this long
-ABANDON_CHECK_S = 0.02           # a thread waiting for its turn looks this often whether it is still wanted
 LAG_PROBE_S = 0.02               # the event loop's timer is probed this often ...
 MAX_LOOP_LAG_S = 0.015           # ... and runs behind when it fires this much late (a frame is 40 ms)
 
@@ -75,11 +74,13 @@ class Turns:
         self._held = False
 
     @contextlib.contextmanager
-    def turn(self, abandon: Callable[[], bool] = lambda: False) -> Iterator[bool]:
-        """Hold the turn for the ``with ... as held`` block.  ``held`` is False when ``abandon()``
-        became True first (the tab asked for a newer analysis): then the block does nothing, and
-        the tab's thread is free for its new request at once instead of after a turn."""
-        if not self._queue(abandon):
+    def turn(self, wake: threading.Event, abandon: Callable[[], bool] = lambda: False) -> Iterator[bool]:
+        """Hold the turn for the ``with ... as held`` block.  ``wake`` is the asking thread's own
+        event: the holder sets it to hand the turn on, and whoever makes ``abandon()`` True sets
+        it too (the tab asked for a newer analysis).  ``held`` is False when it was abandoned
+        first: then the block does nothing, and the tab's thread is free for the new request at
+        once instead of after a turn."""
+        if not self._queue(wake, abandon):
             yield False
             return
         try:
@@ -94,19 +95,19 @@ class Turns:
                 else:
                     self._held = False
 
-    def _queue(self, abandon: Callable[[], bool]) -> bool:
-        """Wait for the turn, in order; False (out of the queue) if ``abandon()`` came first."""
+    def _queue(self, wake: threading.Event, abandon: Callable[[], bool]) -> bool:
+        """Wait in line for the turn; False (out of the line) if ``abandon()`` came first."""
         with self._lock:
             if not self._held:
                 self._held = True
                 return True
-            mine = threading.Event()
-            self._waiting.append(mine)
-        while not mine.wait(ABANDON_CHECK_S):         # handed on by the holder
-            if abandon():
-                with self._lock:
-                    if mine.is_set():                 # handed on just now: it is ours
-                        return True
-                    self._waiting.remove(mine)
+            self._waiting.append(wake)
+        while True:
+            with self._lock:
+                wake.clear()                          # before the checks: a later set is not lost
+                if wake not in self._waiting:         # handed on to this thread
+                    return True
+                if abandon():
+                    self._waiting.remove(wake)
                     return False
-        return True
+            wake.wait()

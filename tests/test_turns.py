@@ -18,7 +18,7 @@ def _queue_up(shared: Turns, names: list[str], order: list[str], hold_s: float =
     threads = []
     for name in names:
         def work(name=name):
-            with shared.turn():
+            with shared.turn(threading.Event()):
                 order.append(name)
                 time.sleep(hold_s)
         thread = threading.Thread(target=work)
@@ -32,24 +32,24 @@ def _queue_up(shared: Turns, names: list[str], order: list[str], hold_s: float =
 
 def test_the_turn_goes_to_whoever_asked_first():
     shared, order = Turns(), []
-    with shared.turn():                                # held: everyone queues behind it
+    with shared.turn(threading.Event()):               # held: everyone queues behind it
         threads = _queue_up(shared, ["a", "b", "c", "d", "e"], order)
         assert order == []                             # nobody runs while it is held
     for thread in threads:
         thread.join(5)
     assert order == ["a", "b", "c", "d", "e"]
-    with shared.turn():                                # free again: taken at once
+    with shared.turn(threading.Event()):               # free again: taken at once
         pass
 
 
 def test_an_error_inside_a_turn_hands_it_on():
     shared = Turns()
-    with pytest.raises(RuntimeError), shared.turn():
+    with pytest.raises(RuntimeError), shared.turn(threading.Event()):
         raise RuntimeError("an analysis failed")
     done = threading.Event()
 
     def next_one():
-        with shared.turn():
+        with shared.turn(threading.Event()):
             done.set()
     threading.Thread(target=next_one).start()
     assert done.wait(2)
@@ -59,13 +59,15 @@ def test_a_waiting_thread_whose_work_is_moot_leaves_the_queue_at_once():
     shared, order, moot = Turns(), [], threading.Event()
     outcome = {}
 
+    wake = threading.Event()
+
     def superseded():
-        with shared.turn(abandon=moot.is_set) as held:
+        with shared.turn(wake, abandon=moot.is_set) as held:
             outcome["held"] = held
             if held:
                 order.append("superseded")
 
-    with shared.turn():
+    with shared.turn(threading.Event()):
         first = _queue_up(shared, ["a"], order)
         waiting = threading.Thread(target=superseded)
         waiting.start()
@@ -74,7 +76,8 @@ def test_a_waiting_thread_whose_work_is_moot_leaves_the_queue_at_once():
             time.sleep(0.001)
         later = _queue_up(shared, ["b"], order)
         started = time.perf_counter()
-        moot.set()                                     # the tab asked for a newer analysis
+        moot.set()                                     # the tab asked for a newer analysis ...
+        wake.set()                                     # ... and woke its analysis thread
         waiting.join(2)
         assert time.perf_counter() - started < 0.2 and outcome == {"held": False}
         assert len(shared._waiting) == 2               # a and b still wait, in order
@@ -87,13 +90,13 @@ def test_a_turn_waits_while_streaming_is_behind_but_not_for_ever(monkeypatch):
     behind = {"until": time.perf_counter() + 0.15}
     shared = Turns(yield_to=lambda: time.perf_counter() < behind["until"])
     started = time.perf_counter()
-    with shared.turn():
+    with shared.turn(threading.Event()):
         waited = time.perf_counter() - started
     assert 0.14 <= waited < 0.5                        # until streaming caught up
     monkeypatch.setattr(turns, "MAX_YIELD_S", 0.2)
     always = Turns(yield_to=lambda: True)
     started = time.perf_counter()
-    with always.turn():
+    with always.turn(threading.Event()):
         waited = time.perf_counter() - started
     assert 0.19 <= waited < 0.6                        # a server that never catches up still analyses
 
