@@ -48,7 +48,6 @@ class _FrameThread:
     def __init__(self, index: int, period_s: float):
         self.period_s = period_s
         self.tickers: list[Ticker] = []
-        self.late = False                             # the last round started behind the clock
         self.wakeup = threading.Condition()
         self.thread = threading.Thread(target=self._loop, name=f"frames-{index}", daemon=True)
         self.thread.start()
@@ -68,7 +67,6 @@ class _FrameThread:
                 tickers = tuple(self.tickers)
             next_frame += self.period_s               # a steady rate: the frame's own work is not added
             delay = next_frame - time.perf_counter()
-            self.late = delay <= 0
             if delay > 0:
                 time.sleep(delay)
             else:
@@ -108,10 +106,6 @@ class FrameClock:
 
     def tabs(self) -> int:
         return sum(len(t.tickers) for t in self.threads)
-
-    def behind(self) -> bool:
-        """Whether a frame thread's last round started late: the scopes need all the CPU they get."""
-        return any(t.late for t in self.threads)
 
 
 CLOCK = FrameClock()

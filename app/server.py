@@ -22,7 +22,7 @@ from pathlib import Path
 import viser
 
 from app import access, traffic
-from app.session import EVENT_LOOP_LAG, LabSession
+from app.session import LabSession
 from app.store import Store, StoreError
 from lab_modules.exercises import get
 from lab_modules.parameters import ParameterError
@@ -139,7 +139,6 @@ def serve(settings: Settings) -> int:
     # narrow gap between the docked controls and charts, and the scenes must fit its width.
     server.initial_camera.position = tuple(CAMERA_POSITION)
     server.initial_camera.look_at = (0.0, 0.0, 0.0)
-    EVENT_LOOP_LAG.watch(server.get_event_loop())          # analyses wait while it runs behind
     sessions: dict[int, LabSession] = {}
     lock = threading.Lock()
 

@@ -33,7 +33,7 @@ from app.actions import ActionPanel
 from app.live import LivePlots, SpeedMeter
 from app.store import Store, StoreError
 from app.traffic import callback
-from app.turns import LoopLag, Turns
+from app.turns import Turns
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, registry
 from lab_modules.parameters import Parameter, ParameterError
 from lab_modules.scenes.bearing import CANVAS_PX
@@ -77,10 +77,8 @@ TAB_CPU_SHARE = 0.15
 TAB_CPU_BURST_S = 1.0
 
 
-#: The process's analyses take turns, after streaming (app/turns.py): every tab's scope keeps its rate.
-#: The server starts ``EVENT_LOOP_LAG`` on viser's event loop.
-EVENT_LOOP_LAG = LoopLag()
-ANALYSIS_TURNS = Turns(yield_to=lambda: frames.CLOCK.behind() or EVENT_LOOP_LAG.behind())
+#: The process's analyses take turns (app/turns.py): one at a time shares the interpreter with streaming.
+ANALYSIS_TURNS = Turns()
 
 
 class CpuBudget:
@@ -805,7 +803,7 @@ class LabSession:
                 while more:
                     if last is None:                      # the quick first result (the readouts) at once
                         last, more = self._show_next(generation, exercise, values, results, last)
-                    else:                                 # the fuller ones take turns after streaming
+                    else:                                 # the fuller ones take turns
                         with ANALYSIS_TURNS.turn(self.turn_wake, abandon=self._analysis_superseded) as held:
                             last, more = (self._show_next(generation, exercise, values, results, last)
                                           if held else (last, False))

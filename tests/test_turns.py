@@ -1,16 +1,14 @@
-"""Analyses take turns after streaming (app/turns.py), and the bench reads the slider-to-readout latency."""
+"""Analyses take turns (app/turns.py), and the bench reads the slider-to-readout latency."""
 
 from __future__ import annotations
 
-import asyncio
 import threading
 import time
 
 import pytest
 
-from app import turns
 from app.load_bench import Tab
-from app.turns import LoopLag, Turns
+from app.turns import Turns
 
 
 def _queue_up(shared: Turns, names: list[str], order: list[str], hold_s: float = 0.02) -> list[threading.Thread]:
@@ -84,40 +82,6 @@ def test_a_waiting_thread_whose_work_is_moot_leaves_the_queue_at_once():
     for thread in first + later:
         thread.join(5)
     assert order == ["a", "b"]
-
-
-def test_a_turn_waits_while_streaming_is_behind_but_not_for_ever(monkeypatch):
-    behind = {"until": time.perf_counter() + 0.15}
-    shared = Turns(yield_to=lambda: time.perf_counter() < behind["until"])
-    started = time.perf_counter()
-    with shared.turn(threading.Event()):
-        waited = time.perf_counter() - started
-    assert 0.14 <= waited < 0.5                        # until streaming caught up
-    monkeypatch.setattr(turns, "MAX_YIELD_S", 0.2)
-    always = Turns(yield_to=lambda: True)
-    started = time.perf_counter()
-    with always.turn(threading.Event()):
-        waited = time.perf_counter() - started
-    assert 0.19 <= waited < 0.6                        # a server that never catches up still analyses
-
-
-def test_loop_lag_sees_a_blocked_event_loop():
-    loop = asyncio.new_event_loop()
-    thread = threading.Thread(target=loop.run_forever, daemon=True)
-    thread.start()
-    try:
-        lag = LoopLag()
-        lag.watch(loop)
-        time.sleep(0.2)
-        assert not lag.behind(), lag.lag_s             # an idle loop fires its timers on time
-        loop.call_soon_threadsafe(time.sleep, 0.1)     # a callback that holds the loop for 100 ms
-        deadline = time.perf_counter() + 2
-        while not lag.behind() and time.perf_counter() < deadline:
-            time.sleep(0.005)
-        assert lag.lag_s >= 0.05
-    finally:
-        loop.call_soon_threadsafe(loop.stop)
-        thread.join(2)
 
 
 def _readouts(value: str) -> dict:
