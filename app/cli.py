@@ -22,20 +22,15 @@ the output) if a metric is not finite and no stop status explains it.
 from __future__ import annotations
 
 import argparse
-import json
-import math
 import sys
 import tempfile
 from pathlib import Path
 
-from app import access
-from app.store import Store, StoreError
-from lab_modules.exercises import get, registry
+from app.commands import headless
+from app.infra import access
 from lab_modules.parameters import ParameterError
-from lab_modules.recordings import MAX_BYTES
 
 USAGE_ERROR = 2
-NOT_FINITE = 1
 
 
 def _serve_options(parser: argparse.ArgumentParser, defaults: bool) -> None:
@@ -133,174 +128,20 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _overrides(pairs: list[str], seed=None, exercise=None) -> dict:
-    overrides = {}
-    for pair in pairs:
-        name, sep, value = pair.partition("=")
-        if not sep or not name:
-            raise ParameterError(f"--set {pair!r} is not NAME=VALUE")
-        overrides[name.strip()] = value.strip()
-    if seed is not None:
-        if exercise is not None and not any(p.name == "seed" for p in exercise.parameters):
-            raise ParameterError(f"--seed: exercise {exercise.name!r} draws no random numbers "
-                                 "(it works on a recording); leave --seed out")
-        overrides["seed"] = seed
-    if "data" in overrides:
-        raise ParameterError("'data' is not a parameter: use --data FILE")
-    return overrides
-
-
-def _duration(text, default: float) -> float:
-    if text is None:
-        return default
-    try:
-        value = float(text)
-    except ValueError:
-        raise ParameterError(f"--duration={text!r} is not a number: expected 0.01 ... 60 s") from None
-    if not math.isfinite(value):
-        raise ParameterError(f"--duration={text!r} is not finite: expected 0.01 ... 60 s")
-    if not 0.01 <= value <= 60.0:
-        raise ParameterError(f"--duration={text!r} is out of range: expected 0.01 ... 60 s")
-    return value
-
-
-def _jsonable(value):
-    """Plain Python numbers for json (numpy scalars, non-finite floats as strings)."""
-    if isinstance(value, dict):
-        return {k: _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if hasattr(value, "item"):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return str(value)
-    return value
-
-
-def command_list(as_json: bool) -> int:
-    exercises = [{"name": e.name, "title": e.title, "worksheet": f"static/worksheets/{e.worksheet}",
-                  "parameters": [p.describe() for p in e.parameters]} for e in registry().values()]
-    if as_json:
-        print(json.dumps(_jsonable(exercises), indent=2, ensure_ascii=False))
-    else:
-        for e in exercises:
-            print(f"{e['name']}: {e['title']}")
-            for p in e["parameters"]:
-                rng = ", ".join(p["choices"]) if "choices" in p else f"{p['min']:g} ... {p['max']:g}"
-                print(f"  {p['name']:<24} default {p['default']!s:<12} [{rng}] {p['unit']}")
-    return 0
-
-
-def read_data_file(exercise, path) -> tuple[str, bytes] | None:
-    """``--data FILE`` as (name, bytes), reading at most ``MAX_BYTES`` (+1 to tell a larger file)."""
-    if path is None:
-        return None
-    if exercise.data_description is None:
-        raise ParameterError(f"exercise {exercise.name!r} takes no --data file")
-    try:
-        with open(path, "rb") as handle:
-            content = handle.read(MAX_BYTES + 1)
-    except OSError as error:
-        raise ParameterError(f"--data {path!r}: {error.strerror}") from None
-    if len(content) > MAX_BYTES:
-        raise ParameterError(f"--data {path!r}: larger than {MAX_BYTES / 1e6:.0f} MB, the largest file accepted")
-    return Path(path).name, content
-
-
-def _store(data_dir) -> Store:
-    try:
-        return Store(data_dir)
-    except StoreError as error:
-        raise ParameterError(str(error)) from None
-
-
-def non_finite(metrics, path: str = "") -> list[str]:
-    """Keys (``a.b.2``) of the metrics that are NaN or infinite."""
-    if isinstance(metrics, dict):
-        return [k for name, v in metrics.items() for k in non_finite(v, f"{path}{name}.")]
-    if isinstance(metrics, (list, tuple)) or hasattr(metrics, "tolist"):
-        items = metrics.tolist() if hasattr(metrics, "tolist") else metrics
-        if not isinstance(items, list):
-            return non_finite(items, path)
-        return [k for i, v in enumerate(items) for k in non_finite(v, f"{path}{i}.")]
-    if isinstance(metrics, (int, float)) and not isinstance(metrics, bool) and not math.isfinite(metrics):
-        return [path.rstrip(".")]
-    return []
-
-
-def stop_statuses(metrics: dict) -> list[str]:
-    """The metrics' stop statuses other than "ok" (a run that touched down or diverged)."""
-    return [f"{name}: {value}" for name, value in metrics.items()
-            if "status" in name and isinstance(value, str) and value != "ok"]
-
-
-def command_run(args) -> int:
-    saved = None
-    if args.code is not None:
-        try:
-            saved = _store(args.data_dir).load(args.code)
-        except StoreError as error:
-            raise ParameterError(str(error)) from None
-        if args.exercise is not None and args.exercise != saved.exercise:
-            raise ParameterError(f"{saved.code} is an experiment of {saved.exercise!r}, not {args.exercise!r}")
-    elif args.exercise is None:
-        raise ParameterError("run: name an exercise (python -m app list) or give --code")
-    exercise = get(saved.exercise if saved else args.exercise)
-    overrides = {**(saved.parameters if saved else {}), **_overrides(args.set, args.seed, exercise)}
-    data_file = read_data_file(exercise, args.data)
-    if data_file is None and saved is not None and saved.recording is not None:
-        data_file = (saved.recording_name, saved.recording)
-    data = exercise.load_data(*data_file) if data_file else None
-    values = exercise.resolve({**overrides, "data": data})
-    duration = _duration(args.duration, exercise.default_duration_s)
-    shown = {name: value for name, value in values.items() if name != "data"}
-    if data_file is not None:
-        shown["data"] = args.data or data_file[0]
-    result = {"exercise": exercise.name, "parameters": shown,
-              "model": exercise.model(values), "metrics": exercise.metrics(values, duration)}
-    if saved is not None:
-        result["code"] = saved.code
-    if args.json:
-        print(json.dumps(_jsonable(result), indent=2, ensure_ascii=False))
-    else:
-        for name, value in result["metrics"].items():
-            print(f"{name}: {value}")
-    bad = non_finite(result["metrics"])
-    if bad and not stop_statuses(result["metrics"]):
-        print(f"error: metric {bad[0]} is not finite" + (f" (and {len(bad) - 1} more)" if len(bad) > 1 else "")
-              + " and no stop status explains it", file=sys.stderr)
-        return NOT_FINITE
-    return 0
-
-
-def command_save(args) -> int:
-    exercise = get(args.exercise)
-    overrides = _overrides(args.set, None, exercise)
-    data_file = read_data_file(exercise, args.data)
-    values = exercise.resolve({**overrides, "data": exercise.load_data(*data_file) if data_file else None})
-    name, content = data_file or (None, None)
-    try:
-        code = _store(args.data_dir).save(exercise.name, values, name, content)
-    except StoreError as error:
-        raise ParameterError(str(error)) from None
-    print(code)
-    return 0
-
-
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     try:
         if args.command == "list":
-            return command_list(args.json)
+            return headless.command_list(args.json)
         if args.command == "run":
-            return command_run(args)
+            return headless.command_run(args)
         if args.command == "reproduce":
-            from app.reproduce import main as reproduce_main
+            from app.commands.reproduce import main as reproduce_main
             return reproduce_main(args.json, args.quick, args.html, args.only)
         if args.command == "save":
-            return command_save(args)
+            return headless.command_save(args)
         if args.command == "bench" and args.browser:
-            from app.browser_bench import main as browser_bench_main
+            from app.commands.browser_bench import main as browser_bench_main
             with tempfile.TemporaryDirectory() as scratch:
                 return browser_bench_main(args.json, Path(scratch) / "server.log")
         if args.command == "haproxy-config":
@@ -311,12 +152,12 @@ def main(argv: list[str] | None = None) -> int:
                                       "run: haproxy -f THIS_FILE"), end="")
             return 0
         if args.command == "bench" and args.clients is not None:
-            from app.load_bench import main as load_bench_main
+            from app.commands.load_bench import main as load_bench_main
             return load_bench_main(args.clients, args.workers, args.steps, args.window, args.exercise,
                                    args.bench_port, args.breakdown, args.json, args.all_steps,
                                    args.slider_every)
         if args.command == "bench":
-            from app.bench import main as bench_main
+            from app.commands.bench import main as bench_main
             return bench_main(args.seconds, args.json)
     except ParameterError as error:
         print(f"error: {error}", file=sys.stderr)

@@ -202,9 +202,9 @@ def _raise_stop(signum, _frame) -> None:
 def serve_hall(settings, workers: int, first_worker_port: int | None, allow_origins: list[str]) -> int:
     """Serve the lab (``settings``: ``app.server.Settings``) with ``workers`` processes behind
     HAProxy until Ctrl-C or SIGTERM."""
-    from app.access import check_bindable
+    from app.infra.access import check_bindable
+    from app.infra.store import Store, StoreError
     from app.server import shown_url
-    from app.store import Store, StoreError
     haproxy = shutil.which("haproxy")
     if haproxy is None:
         print(f"error: {HAPROXY_MISSING}", file=sys.stderr)

@@ -21,9 +21,9 @@ from pathlib import Path
 
 import viser
 
-from app import access, traffic
-from app.session import LabSession
-from app.store import Store, StoreError
+from app.infra import access, traffic
+from app.infra.store import Store, StoreError
+from app.tab.session import LabSession
 from lab_modules.exercises import get
 from lab_modules.parameters import ParameterError
 from lab_modules.scenes.bearing import CAMERA_POSITION

@@ -7,8 +7,8 @@ import os
 
 import pytest
 
-from app.browser_bench import CHROMIUM, CHROMIUM_FLAGS, VIEWPORT
-from app.browser_bench import lab_server as serve_lab
+from app.commands.browser_bench import CHROMIUM, CHROMIUM_FLAGS, VIEWPORT
+from app.commands.browser_bench import lab_server as serve_lab
 
 browser_only = [pytest.mark.browser,
                 pytest.mark.skipif(not os.path.exists(CHROMIUM), reason="Debian's chromium is not installed")]
@@ -52,7 +52,7 @@ class Tab:
 
     def entry_box(self, label: str):
         """The box a value of the control labelled ``label`` is typed into: the row's own text box
-        (a parameter without slider) or the one beside its slider (app/entry.py)."""
+        (a parameter without slider) or the one beside its slider (app/panels/entry.py)."""
         row = self.page.get_by_text(label, exact=True).locator("xpath=../../../..")
         own = row.locator("input.mantine-TextInput-input")
         return own if own.count() else row.locator("xpath=following-sibling::div[1]//input")

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import time
 
-from app.session import SUPERSCRIPT
+from app.panels.text import SUPERSCRIPT
 
 #: the visible pole maps: title, x range, series labels and stroke colours, top-axis labels and
 #: each series' points [[Re s, Im s], ...] (uPlot holds one x array; a series is NaN where it has no pole)

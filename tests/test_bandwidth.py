@@ -1,7 +1,7 @@
 """What one tab of the default exercise costs on the wire (issue 13: <= 150 kB/s per tab).
 
 Bytes per scope update do not depend on the machine's speed, so this is a test, not a
-benchmark: a headless tab (``app.load_bench.Tab``, which decodes everything the lab sends)
+benchmark: a headless tab (``app.commands.load_bench.Tab``, which decodes everything the lab sends)
 watches a lab process in steady state, and everything it received is divided by the scope
 updates it got.  At the full 25 updates/s that is the tab's bandwidth.
 """
@@ -12,8 +12,8 @@ import asyncio
 import time
 from pathlib import Path
 
-from app.load_bench import TARGET_BYTES_PER_S, Tab, lab_server, scope_titles
-from app.session import SCOPE_BUCKETS
+from app.commands.load_bench import TARGET_BYTES_PER_S, Tab, lab_server, scope_titles
+from app.panels.scope_charts import SCOPE_BUCKETS
 
 FRAME_RATE = 25.0          # scope updates per second a tab gets from an idle server
 SETTLE_S = 5.0             # set-up messages and the first analyses are over

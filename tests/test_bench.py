@@ -5,7 +5,7 @@ import math
 
 import pytest
 
-from app import bench
+from app.commands import bench
 
 
 @pytest.mark.parametrize("use_estimate", [False, True])

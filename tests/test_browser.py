@@ -6,7 +6,7 @@ from __future__ import annotations
 import statistics
 import time
 
-from app.browser_bench import slider_latencies_ms
+from app.commands.browser_bench import slider_latencies_ms
 from tests.conftest import browser_only
 
 pytestmark = browser_only

@@ -1,15 +1,15 @@
 """Issue 11, defect 10 in the browser: the box beside a slider takes "1,5"; letters, an empty
 entry and a value out of range are answered with one line under the box naming the parameter,
 the entry and the range with its unit, the box and slider show the value in use, the lab keeps it, and another
-tab notices nothing (app/entry.py)."""
+tab notices nothing (app/panels/entry.py)."""
 
 from __future__ import annotations
 
 import os
 import time
 
-from app import entry
-from app.browser_bench import VIEWPORT
+from app.commands.browser_bench import VIEWPORT
+from app.panels import entry
 from tests.conftest import browser_only
 
 pytestmark = browser_only

@@ -5,11 +5,9 @@ inspector steps one sample and shows the filter at it."""
 from __future__ import annotations
 
 import re
-import threading
 import time
-from types import SimpleNamespace
 
-from app.session import LabSession
+from app.tab.state import window_rows
 from lab_modules.exercises import get
 from tests.conftest import browser_only
 
@@ -19,8 +17,7 @@ pytestmark = browser_only
 def _window_rows(name: str) -> int:
     exercise = get(name)
     values = exercise.resolve({})
-    return LabSession._window_rows(SimpleNamespace(values=values, simulation=exercise.simulation(values),
-                                                   lock=threading.Lock()))
+    return window_rows(values, exercise.simulation(values).sample_time_s)
 
 
 def test_export_downloads_and_inspector_steps(open_tab, tmp_path):

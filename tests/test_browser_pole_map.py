@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from app import pole_map
+from app.panels import pole_map
 from lab_modules.exercises import get
 from tests.conftest import browser_only
 from tests.page_reading import pole_maps as _maps

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import time
 
-from app.store import Store, StoreError
+from app.infra.store import Store, StoreError
 from lab_modules.exercises import get
 from tests.conftest import browser_only
 

@@ -4,7 +4,7 @@ still-segment sliders span the loaded 6 s recording, not 0-3600 s (defect 11).""
 
 from __future__ import annotations
 
-from app.browser_bench import VIEWPORT
+from app.commands.browser_bench import VIEWPORT
 from lab_modules.exercises import get
 from tests.conftest import browser_only
 

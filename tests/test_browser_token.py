@@ -15,8 +15,8 @@ import time
 import msgspec
 import pytest
 
-from app.browser_bench import ROOT, VIEWPORT, free_port
-from app.load_bench import PROTOCOL, wait_http
+from app.commands.browser_bench import ROOT, VIEWPORT, free_port
+from app.commands.load_bench import PROTOCOL, wait_http
 from tests.conftest import browser_only
 from tests.wsclient import CAMERA
 

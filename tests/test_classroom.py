@@ -301,7 +301,7 @@ def test_saved_experiment_survives_sigkill(tmp_path):
             await tab.close()
             return opened, tab.elements[slider]["value"], tab.find_containing("GuiMarkdownMessage", "### Maglev")
         opened, value, heading = run_async(second())
-    from app.store import Store
+    from app.infra.store import Store
     store = Store(tmp_path)
     saved = store.load(code)
     assert opened and heading and store.check() == "ok"

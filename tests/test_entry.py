@@ -1,4 +1,4 @@
-"""Typed values of number parameters (app/entry.py; issue 11, defect 10): what a student may type,
+"""Typed values of number parameters (app/panels/entry.py; issue 11, defect 10): what a student may type,
 what is refused and the one line that says so."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import threading
 
 import pytest
 
-from app import entry
+from app.panels import entry
 from lab_modules.parameters import Parameter, ParameterError
 
 NOISE = Parameter("noise", "Position sensor noise σ", "µm", 1.3323, 0.0, 10.0, "Sensor noise.")

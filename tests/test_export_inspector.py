@@ -17,8 +17,10 @@ import numpy as np
 import pytest
 from filterpy.kalman import KalmanFilter as FilterpyKalman
 
-from app import export, inspector
-from app.session import LabSession
+from app.panels import export, inspector
+from app.panels.export import ExportButtons
+from app.panels.text import readout_rows
+from app.tab.state import window_rows
 from lab_modules.exercises import get, registry
 
 #: the exercises with a Kalman filter in their browser simulation (maglev_tuning replays a
@@ -43,11 +45,16 @@ def _session(name: str, code: str | None = "KN-7Q3M") -> SimpleNamespace:
     session = SimpleNamespace(exercise=exercise, values=values, simulation=simulation, lock=threading.Lock(),
                               columns={c: 1 + i for i, c in enumerate(simulation.columns)},
                               autosave_code=code, client=_Client(), closed=False)
-    session.window = LabSession._window_rows(session)
+    session.window = window_rows(values, simulation.sample_time_s)
     simulation.advance(200)                                   # the window is not the run's start
     session.buffer = simulation.advance(session.window)
     result = exercise.analyse(dict(values))
     session.shown_analysis = result if not hasattr(result, "__next__") else next(result)
+    trace = {c: session.buffer[:, j] for c, j in session.columns.items()}
+    session.export = ExportButtons(exercise, lambda: (session.buffer.copy(), dict(values), tuple(session.columns),
+                                                      code),
+                                   lambda: readout_rows(session.shown_analysis, exercise, trace),
+                                   session.client.send_file_download)
     return session
 
 
@@ -60,7 +67,7 @@ def _csv_body(content: bytes) -> tuple[list[str], list[list[str]]]:
 @pytest.mark.parametrize("name", ["kalman_noise", "maglev_tracking", "lqg_vs_pid"])
 def test_scope_csv_is_the_scope_window_with_units(name):
     session = _session(name)
-    export._send_scope(session)
+    session.export.send_scope()
     (filename, content), = session.client.files
     assert re.fullmatch(rf"{name}_KN-7Q3M_\d{{8}}-\d{{6}}_scope\.csv", filename)
     header, rows = _csv_body(content)
@@ -87,12 +94,12 @@ def test_units_read_from_column_names():
 
 def test_readouts_csv_holds_the_shown_readouts():
     session = _session("kalman_noise", code=None)
-    export._send_readouts(session)
+    session.export.send_readouts()
     (filename, content), = session.client.files
     assert re.fullmatch(r"kalman_noise_\d{8}-\d{6}_readouts\.csv", filename)   # no code: no code part
     header, rows = _csv_body(content)
     assert header == ["quantity", "value", "unit"]
-    expected = export.readout_rows(session)
+    expected = session.export.readout_rows()
     assert len(rows) == len(expected) > len(session.shown_analysis.readouts)   # with the scope window's
     for (label, value, unit), row in zip(expected, rows):
         assert row[0] == label and row[2] == unit
@@ -105,7 +112,7 @@ def test_readouts_csv_holds_the_shown_readouts():
 def test_each_chart_exports_as_a_png():
     session = _session("kalman_noise")
     for chart in session.exercise.charts:
-        export._send_chart(session, chart)
+        session.export.send_chart(chart)
     assert len(session.client.files) == len(session.exercise.charts)
     for (filename, content), chart in zip(session.client.files, session.exercise.charts):
         assert filename.endswith(f"_{re.sub('[^a-z0-9]+', '-', chart.title.lower())}.png")

@@ -8,8 +8,10 @@ import time
 import numpy as np
 import pytest
 
-from app import frames, scope
-from app.session import ROUGHNESS_ROWS, SCOPE_BUCKETS, _scope_rows
+from app.panels import scope, scope_charts
+from app.panels.scope_charts import ROUGHNESS_ROWS, SCOPE_BUCKETS
+from app.panels.scope_charts import scope_rows_reference as _scope_rows
+from app.tab import frames
 
 T = 50e-6
 
@@ -26,7 +28,7 @@ def _buffer(first_sample: int, n: int = 1000, seed: int = 0) -> np.ndarray:
 def test_compiled_rows_are_the_reference_rows(first, n, columns):
     buffer = _buffer(first, n)
     expected = _scope_rows(buffer, columns, T)
-    got = frames.scope_rows(buffer, np.array(columns, dtype=np.int64), T, SCOPE_BUCKETS, ROUGHNESS_ROWS)
+    got = scope_charts.scope_rows(buffer, np.array(columns, dtype=np.int64), T, SCOPE_BUCKETS, ROUGHNESS_ROWS)
     assert np.array_equal(got, expected)
 
 
@@ -38,7 +40,7 @@ def test_compiled_chart_frame_is_the_reference_frame(first, window_ms):
     centre, sigma = rows[:, 1], rows[:, 3]
     expected = [(centre + 3 * sigma) * 1e6, (centre - 3 * sigma) * 1e6] + [rows[:, c] * s for c, s in
                                                                            zip(columns, scales)]
-    got_t, t32, ys, low, high = frames.chart_frame(buffer, np.array(columns), np.array(columns), np.array(scales),
+    got_t, t32, ys, low, high = scope_charts.chart_frame(buffer, np.array(columns), np.array(columns), np.array(scales),
                                               np.array([1, 3]), 1e6, T, window_ms, SCOPE_BUCKETS, ROUGHNESS_ROWS)
     assert np.array_equal(got_t, t_ms) and got_t[0] == -window_ms and np.array_equal(t32, t_ms.astype(np.float32))
     assert ys.dtype == np.float32 and ys.shape == (4, len(t_ms))      # band, series
@@ -49,7 +51,7 @@ def test_compiled_chart_frame_is_the_reference_frame(first, window_ms):
 
 def test_chart_frame_without_band_or_finite_values():
     buffer = _buffer(0, 300)
-    t_ms, _, ys, low, high = frames.chart_frame(buffer, np.array([4]), np.array([4]), np.array([1.0]),
+    t_ms, _, ys, low, high = scope_charts.chart_frame(buffer, np.array([4]), np.array([4]), np.array([1.0]),
                                              np.array([-1, -1]), 1.0, T, 15.0, SCOPE_BUCKETS, ROUGHNESS_ROWS)
     assert ys.shape == (1, len(t_ms)) and np.isnan(ys[0]).all() and low > high
 

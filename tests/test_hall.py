@@ -21,8 +21,8 @@ from pathlib import Path
 
 import pytest
 
+from app.commands.load_bench import Tab, process_tree, scope_titles, wait_http
 from app.hall import HAPROXY_MISSING, haproxy_config
-from app.load_bench import Tab, process_tree, scope_titles, wait_http
 from tests.conftest import Tab as BrowserTab
 from tests.conftest import browser_only
 from tests.wsclient import run_async

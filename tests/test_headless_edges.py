@@ -9,7 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from app.cli import main, non_finite, stop_statuses
+from app.cli import main
+from app.commands.headless import non_finite, stop_statuses
 from tests.test_cli import run_app
 
 REPO = Path(__file__).resolve().parents[1]

@@ -1,8 +1,10 @@
-"""The folders show the block diagram: no module imports from a higher layer.
+"""The folders show the block diagram: no module imports from a higher layer, and
+nothing imports in a circle.
 
 Layers, lowest first: the foundation modules (parameters, claims, analysis,
 recordings), plants, estimators and controllers (side by side), loops,
-scenes and exercises, and the app above all."""
+scenes and exercises, evaluation; then the app: infra, panels, tab and commands
+(side by side), and the roots (cli, server, hall).  Imports inside functions count."""
 
 import ast
 import pathlib
@@ -20,15 +22,24 @@ ALLOWED = {
     "loops": {"foundation", "plants", "estimators", "controllers"},
     "scenes": {"foundation", "plants", "estimators", "controllers", "loops"},
     "exercises": {"foundation", "plants", "estimators", "controllers", "loops", "scenes"},
-    "app": {"foundation", "plants", "estimators", "controllers", "loops", "scenes", "exercises"},
+    "evaluation": {"foundation", "plants", "estimators", "controllers", "loops", "scenes", "exercises"},
 }
+LAB = set(ALLOWED)
+ALLOWED |= {
+    "app.infra": LAB,
+    "app.panels": LAB | {"app.infra"},
+    "app.tab": LAB | {"app.infra", "app.panels"},
+    "app.commands": LAB | {"app.infra", "app.panels"},
+    "app.roots": LAB | {"app.infra", "app.panels", "app.tab", "app.commands"},
+}
+APP_PACKAGES = ("infra", "panels", "tab", "commands")
 
 
 def part_of(module: str) -> str:
     """The layer of a dotted module name inside the project."""
     parts = module.split(".")
     if parts[0] == "app":
-        return "app"
+        return f"app.{parts[1]}" if len(parts) > 1 and parts[1] in APP_PACKAGES else "app.roots"
     assert parts[0] == "lab_modules", module
     if len(parts) == 1:
         return "foundation"
@@ -65,13 +76,77 @@ def test_no_import_from_a_higher_layer(path):
 
 
 def test_every_role_package_is_described():
-    for package in ("plants", "estimators", "controllers", "loops", "scenes", "exercises"):
-        init = ROOT / "lab_modules" / package / "__init__.py"
-        doc = ast.get_docstring(ast.parse(init.read_text()))
+    packages = [ROOT / "lab_modules" / p for p in ("plants", "estimators", "controllers", "loops", "scenes",
+                                                   "exercises", "evaluation")]
+    for package in [*packages, *(ROOT / "app" / p for p in APP_PACKAGES)]:
+        doc = ast.get_docstring(ast.parse((package / "__init__.py").read_text()))
         assert doc and len(doc) > 40, package
+
+
+def module_name(path: pathlib.Path) -> str:
+    parts = path.relative_to(ROOT).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def import_graph() -> dict[str, set[str]]:
+    """Module -> the project modules it imports (anywhere in the file, functions included);
+    ``from package import name`` counts as importing the submodule where ``name`` is one."""
+    modules = {module_name(path): path for path in SOURCES}
+    graph = {}
+    for name, path in modules.items():
+        targets = set()
+        for imported in project_imports(path):
+            while imported and imported not in modules:      # an attribute: its module
+                imported = imported.rpartition(".")[0]
+            if imported and imported != name:
+                targets.add(imported)
+        graph[name] = targets
+    return graph
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components with more than one module (Tarjan)."""
+    index, low, stack, on_stack, found, counter = {}, {}, [], set(), [], [0]
+
+    def visit(node):
+        index[node] = low[node] = counter[0]
+        counter[0] += 1
+        stack.append(node)
+        on_stack.add(node)
+        for target in graph.get(node, ()):
+            if target not in index:
+                visit(target)
+                low[node] = min(low[node], low[target])
+            elif target in on_stack:
+                low[node] = min(low[node], index[target])
+        if low[node] == index[node]:
+            component = []
+            while True:
+                member = stack.pop()
+                on_stack.discard(member)
+                component.append(member)
+                if member == node:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for node in sorted(graph):
+        if node not in index:
+            visit(node)
+    return found
+
+
+def test_no_import_cycle():
+    assert cycles(import_graph()) == []
+
+
+def test_the_cycle_finder_sees_a_cycle():
+    assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
 
 
 def test_the_checker_sees_a_violation(tmp_path):
     """The layer test can fail: a plant importing a loop is reported."""
     assert part_of("lab_modules.loops.radial_axis_loop") not in ALLOWED["plants"]
     assert part_of("lab_modules.analysis") in ALLOWED["plants"]
+    assert part_of("app.tab.session") not in ALLOWED["app.commands"]
+    assert part_of("app.cli") not in ALLOWED["app.panels"]

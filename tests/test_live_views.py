@@ -1,5 +1,5 @@
 """The app's live views without a browser: exercise actions run in the background
-(``app/actions.py``), live plots drawn at a bounded rate and size (``app/live.py``),
+(``app/panels/actions.py``), live plots drawn at a bounded rate and size (``app/panels/live.py``),
 the simulation-speed readout."""
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ import time
 import numpy as np
 import pytest
 
-from app.actions import ActionPanel, result_markdown
-from app.live import LIVE_PERIOD_S, LivePlots, SpeedMeter, chart_data
+from app.panels.actions import ActionPanel, result_markdown
+from app.panels.live import LIVE_PERIOD_S, LivePlots, SpeedMeter, chart_data
 from lab_modules.exercises import Action, Analysis, Exercise, Plot, get
 
 
@@ -56,8 +56,14 @@ class FakeSession:
     def _current(self, generation):
         return generation == self.generation and not self.closed
 
-    def _pause(self, seconds, condition):
+    def pace(self, cpu_s):
         pass
+
+    def action_panel(self, gui, plot_chart):
+        """The panel as the tab builds it, for the generation shown now."""
+        generation = self.generation
+        return ActionPanel(gui, self.exercise, self._on, lambda: dict(self.values),
+                           lambda: self._current(generation), self.gui_lock, self, self.client, plot_chart)
 
 
 def _plot_chart(plot: Plot):
@@ -92,7 +98,7 @@ def test_an_action_runs_in_the_background_and_shows_progress_then_its_result():
     exercise = Slow()
     session = FakeSession(exercise, {})
     gui = FakeGui()
-    panel = ActionPanel(session, gui, _plot_chart)
+    panel = session.action_panel(gui, _plot_chart)
     button, text = gui.handles
     button.clicked()                                  # returns while the action still waits: it runs elsewhere
     assert not exercise.release.is_set() and "step" not in text.content
@@ -108,7 +114,7 @@ def test_a_switched_exercise_stops_its_action():
     exercise = Slow()
     session = FakeSession(exercise, {})
     gui = FakeGui()
-    ActionPanel(session, gui, _plot_chart)
+    session.action_panel(gui, _plot_chart)
     button, text = gui.handles
     button.clicked()
     session.generation = 1

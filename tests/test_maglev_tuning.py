@@ -185,7 +185,7 @@ def test_recording_downloaded_from_the_tracking_exercise_loads_into_the_tuning_e
 def test_small_mean_nis_stays_in_view(overrides):
     """Issue 11, defect 13: a pessimistic filter's windowed mean NIS (1e-5 … 1e-3 here) is drawn on
     the log axis beside the χ² bounds 0.74 … 1.30, not cut off below the chart's 4-decade floor."""
-    from app.session import _plot_chart
+    from app.panels.plots import plot_chart as _plot_chart
     from lab_modules.exercises import get
 
     exercise = get("maglev_tuning")

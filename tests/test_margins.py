@@ -12,7 +12,7 @@ import control
 import numpy as np
 import pytest
 
-from app.margins import MARGIN_GRID_POINTS, margin_view
+from app.panels.margins import MARGIN_GRID_POINTS, margin_view
 from lab_modules import analysis
 from lab_modules.exercises import get, registry
 from lab_modules.exercises.kalman_noise import setup
@@ -204,7 +204,8 @@ def test_analysis_charts_follow_plots_that_change_between_results():
     data, and missing charts are added (before, the margin charts drew other plots' data)."""
     import contextlib
 
-    from app.session import LabSession, _plot_shape
+    from app.panels.plots import AnalysisPlots
+    from app.panels.plots import plot_shape as _plot_shape
     from lab_modules.exercises import Plot
 
     class Handle:
@@ -218,18 +219,17 @@ def test_analysis_charts_follow_plots_that_change_between_results():
     class Stub:
         def __init__(self):
             self.plots, self.plot_shapes = [], []
-            self.tabs = {"Analysis": contextlib.nullcontext()}
-            self.client = type("Client", (), {"gui": type("Gui", (), {"add_uplot": staticmethod(
-                lambda data, **options: Handle(data, **options))})(), "atomic": contextlib.nullcontext})()
+            self.container, self.atomic = contextlib.nullcontext(), contextlib.nullcontext
+            self.gui = type("Gui", (), {"add_uplot": staticmethod(lambda data, **options: Handle(data, **options))})()
 
     def plot(title: str) -> Plot:
         return Plot(title, "x [1]", "y [1]", np.arange(3.0), ((title, np.ones(3), "#000000"),))
     stub = Stub()
-    LabSession._update_plots(stub, [plot("a"), plot("margin")])
-    LabSession._update_plots(stub, [plot("a"), plot("b"), plot("margin")])
+    AnalysisPlots.update(stub, [plot("a"), plot("margin")])
+    AnalysisPlots.update(stub, [plot("a"), plot("b"), plot("margin")])
     assert [h.title for h in stub.plots] == ["a", "b", "margin"]
     assert stub.plot_shapes == [_plot_shape(plot(t)) for t in ("a", "b", "margin")]
     assert [s["label"] for s in stub.plots[1].series[1:]] == ["b"]
     removed = stub.plots[2]
-    LabSession._update_plots(stub, [plot("a"), plot("b")])
+    AnalysisPlots.update(stub, [plot("a"), plot("b")])
     assert removed.removed and len(stub.plots) == 2

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from app import pole_map
+from app.panels import pole_map
 from lab_modules import analysis
 from lab_modules.exercises import Analysis, get, registry
 from lab_modules.exercises._common import axis_loop_modes, axis_mode_matrices

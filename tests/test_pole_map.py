@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from app import pole_map
+from app.panels import pole_map
 from lab_modules import analysis
 from lab_modules.exercises import Analysis, get, registry, sensor_placement
 from lab_modules.exercises.ekf_parameters import linear_axis, linear_poles

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from app import scope
+from app.panels import scope
 from lab_modules.exercises import registry
 
 EXERCISES = registry()

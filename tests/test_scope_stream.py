@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from app.session import SCOPE_BUCKETS, _float32_resolves, _scope_rows
+from app.panels.scope_charts import SCOPE_BUCKETS
+from app.panels.scope_charts import float32_resolves as _float32_resolves
+from app.panels.scope_charts import scope_rows_reference as _scope_rows
 
 T = 50e-6
 

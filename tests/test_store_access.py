@@ -1,12 +1,12 @@
-"""Saved experiments (app/store.py) and the access checks (app/access.py)."""
+"""Saved experiments (app/infra/store.py) and the access checks (app/infra/access.py)."""
 
 import sqlite3
 import threading
 
 import pytest
 
-from app.access import OriginPolicy, check_host, check_port, is_loopback, new_token, token_matches
-from app.store import CODE_ALPHABET, Store, StoreError, code_prefix, normalise_code
+from app.infra.access import OriginPolicy, check_host, check_port, is_loopback, new_token, token_matches
+from app.infra.store import CODE_ALPHABET, Store, StoreError, code_prefix, normalise_code
 from lab_modules.parameters import ParameterError
 
 
@@ -90,7 +90,7 @@ def test_token_and_origin():
 
 OPEN_FRESH = """
 import sys, time
-from app.store import Store
+from app.infra.store import Store
 time.sleep(max(0.0, float(sys.argv[2]) - time.time()))    # all processes open at the same instant
 Store(sys.argv[1]).save("kalman_noise", {})
 """

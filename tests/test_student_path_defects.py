@@ -135,7 +135,7 @@ WORDS = {"touched down", "not reached", "computing …", "none"} | {f"mode {j}" 
 def _check_readouts(name: str, readouts) -> None:
     import re
 
-    from app.session import _format
+    from app.panels.text import readout as _format
     for label, value, unit in readouts:
         assert not any(mark in label for mark in FORMULA_MARKS), (name, label)
         assert not label.startswith("…"), (name, label)
@@ -166,7 +166,7 @@ def test_readouts_are_names_units_and_numbers(name):
 
 
 def test_readout_numbers_read_as_numbers():
-    from app.session import _format
+    from app.panels.text import readout as _format
     assert _format(480_000.0) == "480\u202f000" and _format(1.03e6) == "1\u202f030\u202f000"
     assert _format(7.5e-8) == "7.5·10⁻⁸" and _format(240.0) == "240" and _format(-1700.0) == "-1\u202f700"
     assert _format("touched down") == "touched down" and _format(float("nan")) == "—"

@@ -1,4 +1,4 @@
-"""Analyses take turns (app/turns.py), and the bench reads the slider-to-readout latency."""
+"""Analyses take turns (app/tab/turns.py), and the bench reads the slider-to-readout latency."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import time
 
 import pytest
 
-from app.load_bench import Tab
-from app.turns import Turns
+from app.commands.load_bench import Tab
+from app.tab.turns import Turns
 
 
 def _queue_up(shared: Turns, names: list[str], order: list[str], hold_s: float = 0.02) -> list[threading.Thread]:

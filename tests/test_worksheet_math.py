@@ -2,7 +2,7 @@
 as MathML, no identifier italicised by its underscores, no LaTeX left as text.
 
 The worksheets are parsed by markdown-it (CommonMark with GFM tables, like viser's
-react-markdown with remark-gfm) after ``app.worksheets.text`` has typeset them."""
+react-markdown with remark-gfm) after ``app.panels.worksheets.text`` has typeset them."""
 
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ import re
 import pytest
 from markdown_it import MarkdownIt
 
-from app import worksheets
-from app.typeset import formulas, mathml, typeset
+from app.panels import worksheets
+from app.panels.typeset import formulas, mathml, typeset
 from lab_modules.exercises import registry
 
 EXERCISES = list(registry().values())

@@ -70,7 +70,7 @@ BEARING_FORCE_GREEN, DISTURBANCE_PURPLE = (44, 160, 44), (148, 103, 189)
 # server sets it (app/server.py), the views are framed for it.
 CAMERA_POSITION = np.array([4.0, 4.0, 4.0])
 CAMERA_FOV_RAD = np.deg2rad(75.0)
-CANVAS_PX = (1366 - 380 - 600, 768)  # 1366x768 less the docked controls and charts (app/session.py)
+CANVAS_PX = (1366 - 380 - 600, 768)  # 1366x768 less the docked controls and charts (app/tab/session.py)
 BEARING_CENTRE_PX = (193, 300)
 STATOR_DIAMETER_PX = 300
 

@@ -23,7 +23,7 @@ AMPLITUDE_M = 0.05              # drawn peak deflection of the shown mode
 VIEW_SCALE = 4.0                # the rotor is drawn four times life size
 ROOT = "/rotor_view"
 SHOWN_FREQUENCY_HZ = 0.125      # the animation's (slowed) oscillation: eight drawn frames a swing at the
-                                # 3D view's default once-a-second refresh (app/session.py SCENE_REFRESH)
+                                # 3D view's default once-a-second refresh (app/tab/session.py SCENE_REFRESH)
 RING_SEGMENTS = 20
 SHAFT_STATIONS = 92
 STEEL, LAMINATION, STATOR = (175, 180, 190), (70, 90, 140), (150, 150, 150)

@@ -22,7 +22,8 @@ from __future__ import annotations
 import numpy as np
 import viser
 
-from app import scope
+from app.infra.viser_internals import send_data
+from app.panels import scope
 from lab_modules.exercises import Exercise, Plot
 
 LIVE_PERIOD_S = 0.25              # live plots: at most 4 updates/s (self_sensing: ~14 kB per update)
@@ -100,8 +101,7 @@ class LivePlots:
                 handle.title = plot.title
                 handle.data = data
                 continue
-            handle._impl.props.data = data              # straight to the wire, as the scope's
-            handle._queue_update("data", data)
+            send_data(handle, data)                     # straight to the wire, as the scope's
 
 
 class SpeedMeter:

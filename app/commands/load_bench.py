@@ -42,7 +42,7 @@ import zstandard
 
 from lab_modules.exercises import get
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 PROTOCOL = f"viser-v{viser.__version__}"      # the subprotocol a viser client of this version offers
 MIN_UPDATES_PER_S = 20.0
 TARGET_BYTES_PER_S = 150e3

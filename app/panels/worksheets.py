@@ -18,11 +18,12 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from app.typeset import typeset
+from app.panels.typeset import typeset
 from lab_modules.claims import markdown_table, render_worksheet
-from lab_modules.exercises import Exercise
+from lab_modules.evaluation.measured_claims import measure
+from lab_modules.exercises import Exercise, get
 
-STATIC = Path(__file__).resolve().parent.parent / "static"
+STATIC = Path(__file__).resolve().parents[2] / "static"
 PARENT_CHECK_S = 1.0            # how often the measuring process checks that the server still runs
 NICENESS = 19                   # the measuring process yields to the tabs (and anything else) on the machine
 
@@ -49,15 +50,13 @@ def _worker_start(server_pid: int) -> None:
 
 def _measure(name: str) -> list[float]:
     """In the background process: the exercise's claim values (NaN where a metric fails)."""
-    from lab_modules.exercises import get
     exercise = get(name)
-    from app.reproduce import measure
     return [float("nan") if row.value is None else row.value for row in measure([exercise], quick=True)]
 
 
 def text(exercise: Exercise, values: list[float] | None = None) -> str:
     """The worksheet with its claims table (``values`` None: "…" in the lab column) and its
-    formulas typeset (``app.typeset``)."""
+    formulas typeset (``app.panels.typeset``)."""
     sheet = (STATIC / "worksheets" / exercise.worksheet).read_text(encoding="utf-8")
     return typeset(render_worksheet(sheet, markdown_table(exercise.claims, values)))
 

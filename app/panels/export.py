@@ -6,7 +6,7 @@ charts show, every sample, not the thinned points sent to the browser), so a
 file holds exactly what the student saw and the tests can check it.  The PNGs
 are drawn by matplotlib (``matplotlib.figure`` only, no pyplot, Agg canvas)
 like the scope: the same series, colours, units and ±3σ band.  File names
-carry the exercise, the tab's experiment code (``app/store.py``) when it has
+carry the exercise, the tab's experiment code (``app/infra/store.py``) when it has
 one, and the server's local time: ``kalman_noise_KN-7Q3M_20261123-141502_scope.csv``.
 """
 
@@ -15,13 +15,14 @@ from __future__ import annotations
 import io
 import re
 import time
+from collections.abc import Callable
 
 import numpy as np
 import viser
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from lab_modules.exercises import Analysis, Chart, Exercise
+from lab_modules.exercises import Chart, Exercise
 from lab_modules.exercises._figures import draw_chart
 
 #: Unit tokens at the end of a column name (``x_true_m``, ``ki_true_n_per_a``) and their symbols
@@ -111,57 +112,44 @@ def chart_png(exercise: Exercise, chart: Chart, columns: tuple[str, ...], buffer
     return out.getvalue()
 
 
-def readout_rows(session) -> list[tuple[str, float, str]]:
-    """The readouts the tab shows: the analysis's, then the scope window's."""
-    analysis: Analysis | None = session.shown_analysis
-    rows = list(analysis.readouts) if analysis is not None else []
-    with session.lock:
-        trace = {name: session.buffer[:, column] for name, column in session.columns.items()}
-    if len(next(iter(trace.values()), ())) >= 10:
-        rows += [(f"{label} (scope window)", value, unit)
-                 for label, value, unit in session.exercise.live_readouts(trace)]
-    return rows
+class ExportButtons:
+    """The Scope tab's folder "Export for your report": CSV of the scope window and of the
+    readouts, a PNG per chart."""
 
+    def __init__(self, exercise: Exercise, snapshot: Callable[[], tuple],
+                 readout_rows: Callable[[], list], send: Callable[..., None]):
+        """``snapshot()`` gives (scope buffer, values, column names, experiment code);
+        ``readout_rows()`` the readouts shown; ``send(filename, content, save_immediately=True)``
+        sends a file to the browser."""
+        self.exercise, self.snapshot, self.readout_rows, self.send = exercise, snapshot, readout_rows, send
 
-def add_buttons(session) -> None:
-    """The export buttons (call inside the Scope tab while the GUI is built)."""
-    gui, exercise = session.client.gui, session.exercise
-    with gui.add_folder("Export for your report", expand_by_default=False):
-        gui.add_markdown("*Files named after the exercise, the experiment code and the time. "
-                         "The scope window holds every sample of the charts; pause first to keep "
-                         "the CSV and the pictures of the same moment.*")
-        choices = {"Scope window (CSV)": lambda: _send_scope(session),
-                   "Readouts (CSV)": lambda: _send_readouts(session)}
-        for chart in exercise.charts:
-            choices[f"Chart: {chart.title} (PNG)"] = lambda chart=chart: _send_chart(session, chart)
-        for label, action in choices.items():
-            button = gui.add_button(label, icon=viser.Icon.DOWNLOAD)
-            button.on_click(session._on(("export", label), action))
+    @classmethod
+    def add(cls, gui, exercise: Exercise, on, snapshot, readout_rows, send) -> ExportButtons:
+        """The buttons (call inside the Scope tab while the GUI is built)."""
+        buttons = cls(exercise, snapshot, readout_rows, send)
+        with gui.add_folder("Export for your report", expand_by_default=False):
+            gui.add_markdown("*Files named after the exercise, the experiment code and the time. "
+                             "The scope window holds every sample of the charts; pause first to keep "
+                             "the CSV and the pictures of the same moment.*")
+            choices = {"Scope window (CSV)": buttons.send_scope, "Readouts (CSV)": buttons.send_readouts}
+            for chart in exercise.charts:
+                choices[f"Chart: {chart.title} (PNG)"] = lambda chart=chart: buttons.send_chart(chart)
+            for label, action in choices.items():
+                button = gui.add_button(label, icon=viser.Icon.DOWNLOAD)
+                button.on_click(on(("export", label), action))
+        return buttons
 
+    def send_scope(self) -> None:
+        buffer, values, columns, code = self.snapshot()
+        content = scope_csv(self.exercise, columns, buffer, values, code)
+        self.send(filename(self.exercise, code, "scope", "csv"), content, save_immediately=True)
 
-def _snapshot(session) -> tuple[np.ndarray, dict, str | None]:
-    with session.lock:
-        return session.buffer.copy(), dict(session.values), session.autosave_code
+    def send_readouts(self) -> None:
+        _, values, _, code = self.snapshot()
+        content = readouts_csv(self.exercise, self.readout_rows(), values, code)
+        self.send(filename(self.exercise, code, "readouts", "csv"), content, save_immediately=True)
 
-
-def _send_scope(session) -> None:
-    buffer, values, code = _snapshot(session)
-    exercise = session.exercise
-    content = scope_csv(exercise, tuple(session.columns), buffer, values, code)
-    session.client.send_file_download(filename(exercise, code, "scope", "csv"), content, save_immediately=True)
-
-
-def _send_readouts(session) -> None:
-    _, values, code = _snapshot(session)
-    exercise = session.exercise
-    content = readouts_csv(exercise, readout_rows(session), values, code)
-    session.client.send_file_download(filename(exercise, code, "readouts", "csv"), content,
-                                      save_immediately=True)
-
-
-def _send_chart(session, chart: Chart) -> None:
-    buffer, _, code = _snapshot(session)
-    exercise = session.exercise
-    content = chart_png(exercise, chart, tuple(session.columns), buffer, code)
-    session.client.send_file_download(filename(exercise, code, chart.title, "png"), content,
-                                      save_immediately=True)
+    def send_chart(self, chart: Chart) -> None:
+        buffer, _, columns, code = self.snapshot()
+        content = chart_png(self.exercise, chart, columns, buffer, code)
+        self.send(filename(self.exercise, code, chart.title, "png"), content, save_immediately=True)

@@ -10,7 +10,7 @@ a slider moves it.
 
 from __future__ import annotations
 
-from app import pole_map
+from app.panels import pole_map
 
 
 class ModePicker:

@@ -53,12 +53,15 @@ def result_markdown(result: Analysis, running: bool) -> str:
 class ActionPanel:
     """The buttons of one exercise's actions in one tab (one generation of it)."""
 
-    def __init__(self, session, gui, plot_chart: Callable[[Plot], tuple[tuple, dict]]):
-        """Add a button and a result text per action to the current container (the controls);
-        ``plot_chart`` turns a ``Plot`` into uPlot arguments."""
-        self.session, self.gui, self.plot_chart = session, gui, plot_chart
-        self.generation = session.generation
-        self.exercise = session.exercise
+    def __init__(self, gui, exercise, on, values: Callable[[], dict], is_current: Callable[[], bool], gui_lock,
+                 pacer, client, plot_chart: Callable[[Plot], tuple[tuple, dict]]):
+        """Add a button and a result text per action to the current container (the controls).
+        ``on(key, action)`` makes a GUI callback that runs ``action`` on the tab's worker;
+        ``values()`` the tab's current values; ``is_current()`` whether this exercise still owns
+        the tab; ``pacer.pace(cpu_s)`` books CPU time on the tab's budget; ``client`` sends
+        (``flush``) and names threads; ``plot_chart`` turns a ``Plot`` into uPlot arguments."""
+        self.gui, self.exercise, self.values, self.is_current = gui, exercise, values, is_current
+        self.gui_lock, self.pacer, self.client, self.plot_chart = gui_lock, pacer, client, plot_chart
         self.runs: dict[str, int] = {}                  # action label -> number of its newest run
         self.results: dict[str, object] = {}            # action label -> its result text
         self.plots: dict[str, list] = {}                # action label -> its result plots (added lazily)
@@ -66,41 +69,39 @@ class ActionPanel:
             button = gui.add_button(action.label, hint=action.hint or None)
             self.results[action.label] = gui.add_markdown("")
             self.plots[action.label] = []
-            button.on_click(session._on(("action", action.label), lambda a=action: self.start(a)))
+            button.on_click(on(("action", action.label), lambda a=action: self.start(a)))
 
     def start(self, action: Action) -> None:
         """Run ``action`` on a thread of its own at the tab's current values (newest press wins)."""
         run = self.runs.get(action.label, 0) + 1
         self.runs[action.label] = run
-        with self.session.lock:
-            values = dict(self.session.values)
+        values = self.values()
         self.results[action.label].content = "⏳ **starting …**"
         threading.Thread(target=self._run, args=(action, values, run), daemon=True,
-                         name=f"action-{self.session.client.client_id}").start()
+                         name=f"action-{self.client.client_id}").start()
 
     def _current(self, action: Action, run: int) -> bool:
-        return self.runs.get(action.label) == run and self.session._current(self.generation)
+        return self.runs.get(action.label) == run and self.is_current()
 
     def _run(self, action: Action, values: dict, run: int) -> None:
-        session = self.session
         spent = time.thread_time()
         steps = _steps(getattr(self.exercise, action.method)(values))
         try:
             result = next(steps, None)
             while result is not None:
                 following = next(steps, None)           # one step ahead: the last result is the final one
-                with session.gui_lock:
+                with self.gui_lock:
                     if not self._current(action, run):
                         return
                     self._show(action, result, running=following is not None)
                 result = following
-                session._pause(session.budget.charge(time.thread_time() - spent), session.analysis_wakeup)
+                self.pacer.pace(time.thread_time() - spent)
                 spent = time.thread_time()
                 if not self._current(action, run):
                     return
         except Exception as error:  # noqa: BLE001 - shown below the button; the tab goes on
             traceback.print_exc()
-            with session.gui_lock:
+            with self.gui_lock:
                 if self._current(action, run):
                     self.results[action.label].content = f"⚠️ {action.label} failed: {error}"
         finally:
@@ -121,4 +122,4 @@ class ActionPanel:
             else:                                       # right below the text (same container: the root)
                 handles.append(self.gui.add_uplot(data, **options, aspect=PLOT_ASPECT,
                                                   order=text.order + 0.001 * (index + 1)))
-        self.session.client.flush()
+        self.client.flush()

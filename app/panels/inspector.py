@@ -12,7 +12,6 @@ with an SI prefix chosen per row, so x̂ and its σ share one unit.
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 import viser
@@ -103,44 +102,24 @@ def markdown(state: dict | None, sample_time_s: float) -> str:
     return "\n".join(lines)
 
 
-def add_controls(session) -> None:
-    """The inspector folder (call while the GUI is built, in the controls panel)."""
-    if not available(session.simulation):
-        session.inspector = None
-        return
-    gui = session.client.gui
-    with gui.add_folder("Filter inspector", expand_by_default=False):
-        step = gui.add_button("Step one sample", icon=viser.Icon.PLAYER_TRACK_NEXT,
-                              hint="Pauses the simulation and runs one sample: sensors, filter correction, "
-                                   "controller, prediction, plant.")
-        step.on_click(session._on("inspector step", lambda: step_one(session)))
-        session.inspector = gui.add_markdown(RUNNING_NOTE)
+class FilterInspector:
+    """The "Filter inspector" folder in the controls: a Step button and the filter's numbers."""
 
+    def __init__(self, gui, on_step):
+        with gui.add_folder("Filter inspector", expand_by_default=False):
+            step = gui.add_button("Step one sample", icon=viser.Icon.PLAYER_TRACK_NEXT,
+                                  hint="Pauses the simulation and runs one sample: sensors, filter correction, "
+                                       "controller, prediction, plant.")
+            step.on_click(on_step)
+            self.text = gui.add_markdown(RUNNING_NOTE)
 
-def refresh(session) -> None:
-    """Show the filter at the newest sample while paused (call holding ``gui_lock``)."""
-    handle = getattr(session, "inspector", None)
-    if handle is None or session.closed:
-        return
-    with session.lock:
-        running, simulation = session.running, session.simulation
+    @classmethod
+    def add(cls, gui, simulation, on_step) -> FilterInspector | None:
+        """The inspector for ``simulation`` (None if it has no filter to inspect); ``on_step`` is
+        the Step button's callback."""
+        return cls(gui, on_step) if available(simulation) else None
+
+    def show(self, running: bool, simulation) -> None:
+        """The filter at the newest sample while paused (call holding the tab's GUI lock)."""
         state = simulation.filter_state() if not running and available(simulation) else None
-    handle.content = RUNNING_NOTE if running else markdown(state, simulation.sample_time_s)
-
-
-def step_one(session) -> None:
-    """Pause, advance one sample, draw it and show the filter."""
-    with session.lock:
-        session.running = False
-        trace = session.simulation.advance(1)
-        session.buffer = np.concatenate([session.buffer, trace])[-session._window_rows():]
-        message = session.simulation.status_message()
-    with session.gui_lock:
-        if session.closed:
-            return
-        session.status.content = (f"**Stopped: {message}** Press Run or Reset to start again." if message
-                                  else "**Paused** (stepping one sample at a time)")
-        session._draw()
-        if getattr(session, "live", None) is not None:       # the exercise's live plots follow the step
-            session.live.draw(session.simulation, time.perf_counter(), getattr(session, "drawn_until", None))
-        refresh(session)
+        self.text.content = RUNNING_NOTE if running else markdown(state, simulation.sample_time_s)

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import viser
 
-from app import scope
+from app.panels import scope
 from lab_modules import analysis
 from lab_modules.exercises import Exercise
 

@@ -32,10 +32,10 @@ from pathlib import Path
 
 import numpy as np
 
-from app.load_bench import wait_http
-from app.session import SCENE_REFRESH
+from app.commands.load_bench import wait_http
+from app.panels.scene_view import SCENE_REFRESH
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
                   "--disable-component-update", "--disable-sync", "--no-first-run"]

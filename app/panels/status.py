@@ -1,0 +1,40 @@
+"""The simulation's state under its Run / Pause / Reset buttons: running, paused or stopped
+(with a card when it stops), and how fast it runs."""
+
+from __future__ import annotations
+
+from app.panels.live import SpeedMeter
+
+RUNNING, PAUSED = "**Running**", "**Paused**"
+
+
+def stopped(message: str) -> str:
+    return f"**Stopped: {message}** Press Run or Reset to start again."
+
+
+class SimulationStatus:
+    """The status line and speed line of one exercise, and the tab's one 'Simulation stopped' card."""
+
+    def __init__(self, client):
+        self.client = client
+        self.line = None                          # running / paused / stopped
+        self.speed = None                         # × real time, filled in while it runs
+        self.meter = SpeedMeter()
+        self.card = None
+
+    def add_line(self, gui) -> None:
+        self.line = gui.add_markdown(RUNNING)
+
+    def add_speed(self, gui) -> None:
+        self.speed, self.meter = gui.add_markdown(""), SpeedMeter()
+
+    def notify_stop(self, message: str) -> None:
+        """One 'Simulation stopped' card at a time: a new stop replaces the last card."""
+        self.clear_card()
+        self.card = self.client.add_notification("Simulation stopped", message, color="red",
+                                                 auto_close_seconds=10.0)
+
+    def clear_card(self) -> None:
+        if self.card is not None:
+            self.card.remove()
+            self.card = None

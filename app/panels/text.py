@@ -1,0 +1,56 @@
+"""Text a student reads in a tab: readout values, table cells and typed text shown as typed."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
+
+
+def escaped(text) -> str:
+    """Text shown in a Markdown element as typed (file names, error messages): Markdown's
+    special characters backslash-escaped, then &, < and > as HTML entities (viser's
+    Markdown renders raw HTML)."""
+    text = re.sub(r"([\\`*_{}\[\]()#+\-.!|~])", r"\\\1", str(text))
+    return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+
+
+def cell(text: str) -> str:
+    """A readout's label or unit as one Markdown table cell: "|S|max" must not end the cell."""
+    return str(text).replace("|", "\\|")
+
+
+def readout(value: float | str) -> str:
+    """A readout's value as a student reads it: 3 significant digits, thousands grouped up to 10⁹
+    ("480 000"), powers of ten written out beyond ("7.5·10⁻⁸"), a word as it is ("touched down")."""
+    if isinstance(value, str):                        # a word instead of a number
+        return value
+    if np.isnan(value):
+        return "—"
+    if np.isinf(value):
+        return "∞ (unstable)"
+    if 1e3 <= abs(value) < 1e9:
+        return f"{float(f'{value:.4g}'):,.0f}".replace(",", "\u202f")   # narrow no-break space
+    text = f"{value:.3g}"
+    if "e" in text:
+        mantissa, exponent = text.split("e")
+        return f"{mantissa}·10{str(int(exponent)).translate(SUPERSCRIPT)}"
+    return text
+
+
+def readout_rows(result, exercise, trace: dict) -> list[tuple[str, object, str]]:
+    """The readouts a tab shows: the analysis's (``result`` may be None), then the exercise's
+    figures of the scope window ``trace`` (column -> samples) once it holds 10 samples."""
+    rows = list(result.readouts) if result is not None else []
+    if len(next(iter(trace.values()), ())) >= 10:
+        rows += [(f"{label} (scope window)", value, unit) for label, value, unit in exercise.live_readouts(trace)]
+    return rows
+
+
+def readouts_table(rows, notes=()) -> str:
+    """Readouts ``(label, value, unit)`` as a Markdown table, then ``notes`` in italics."""
+    lines = ["| quantity | value | unit |", "|---|---:|---|"]
+    lines += [f"| {cell(label)} | {readout(value)} | {cell(unit)} |" for label, value, unit in rows]
+    return "\n".join(lines) + "\n\n" + "\n\n".join(f"*{n}*" for n in notes)

@@ -1,0 +1,393 @@
+"""One browser tab's lab: its own exercise, simulation, parameters, seed and views.
+
+A ``LabSession`` builds the GUI of any exercise generically from the exercise's
+parameters, charts, analysis and optional 3D scene, and is made of small parts, each
+with its own state set in its constructor:
+
+* ``TabWorker`` (``worker.py``): every event of the tab on one thread, newest per control;
+* ``TokenGate`` (``gate.py``): the class token, before anything else is built;
+* ``SavedExperiments`` (``saved.py``): autosave, restore on reload, Save and Open;
+* ``LabState`` (``state.py``): the running exercise, values, simulation and scope buffer;
+* ``Controls`` (``controls.py``): sliders, typed values and the line under a refused one;
+* ``AnalysisView`` (``analysis_view.py``): readouts, pole map and plots on their own thread;
+* ``Stream`` (``streaming.py``): the simulation's frames on the shared frame clock;
+* the panels of ``app.panels``: docks, scope charts, live plots, status, inspector,
+  export, actions, worksheets.
+
+Each exercise shown in the tab is one *generation*: switching exercises starts a new one,
+and the frames and analyses of an older generation stop writing to the tab (its GUI
+handles are gone).  A tab closed while its lab is being built stops building.
+"""
+
+from __future__ import annotations
+
+import itertools
+import sys
+import threading
+import time
+import traceback
+from collections.abc import Callable
+
+import viser
+
+from app.infra import layout
+from app.infra.store import Store
+from app.panels import entry, scope, worksheets
+from app.panels.actions import ActionPanel
+from app.panels.docks import Docks
+from app.panels.export import ExportButtons
+from app.panels.inspector import FilterInspector
+from app.panels.live import LivePlots
+from app.panels.plots import plot_chart
+from app.panels.scene_view import SceneView
+from app.panels.scope_charts import ScopeCharts
+from app.panels.status import PAUSED, RUNNING, SimulationStatus
+from app.panels.text import escaped
+from app.tab.analysis_view import AnalysisView
+from app.tab.controls import Controls
+from app.tab.gate import TokenGate
+from app.tab.saved import SavedExperiments
+from app.tab.state import LabState
+from app.tab.streaming import Problems, Stream
+from app.tab.worker import TabClosed, TabWorker
+from lab_modules.exercises import Exercise, registry
+from lab_modules.parameters import Parameter, ParameterError
+
+SETTLE_BEFORE_REMOVAL_S = 0.3     # an exercise switch waits this long between the last chart update and removal
+
+
+class LabSession:
+    """The lab in one browser tab."""
+
+    def __init__(self, client: viser.ClientHandle, exercise: Exercise, store: Store | None = None,
+                 token: str | None = None, on_refused: Callable[[str], None] | None = None):
+        """Cheap: the lab is built on the tab's worker thread (after the class token, if one is set)."""
+        self.client = client
+        self.exercises = registry()
+        self.token = token
+        self.on_refused = on_refused or (lambda _reason: None)   # disconnects the tab (too many wrong tokens)
+        self.gui_lock = threading.RLock()         # writes to the GUI handles; held while the GUI is rebuilt
+        self.generations = itertools.count()
+        self.generation = next(self.generations)
+        self.worker = TabWorker(f"tab-{client.client_id}")
+        self.state = LabState()
+        self.saved = SavedExperiments(store, client, self.gui_lock, self.state.snapshot, self.worker)
+        self.controls = Controls(self.worker, self.state, self.gui_lock, self._apply)
+        self.worker.before_event = self.controls.flush_typing
+        self.analysis = AnalysisView(client, self.gui_lock, self.state, self.worker, self._current)
+        self.docks = Docks()
+        self.scene_view = SceneView()
+        self.status = SimulationStatus(client)
+        self.problems = Problems(self.gui_lock, self._show_problem)
+        self.gate: TokenGate | None = None
+        self.scene = None                         # the exercise's 3D view (None: it has none)
+        self.stream: Stream | None = None
+        self.inspector: FilterInspector | None = None
+        self.download_note = None                 # what the exercise's download button did
+        self.worker.start(lambda: self._work(exercise))
+
+    @property
+    def closed(self) -> bool:
+        return self.worker.closed
+
+    # -- the tab's worker: every event, in order, newest value per control ----------------
+    def post(self, key, action: Callable[[], None]) -> None:
+        """Queue ``action`` for the worker (safe from any thread, including viser's event loop)."""
+        self.worker.post(key, action)
+
+    def _work(self, exercise: Exercise) -> None:
+        try:
+            with self.gui_lock:
+                self.worker.check_open()
+                self.client.gui.configure_theme(dark_mode=False, show_logo=False, control_width="large")
+                # shadow passes made every scene update costly
+                self.client.scene.configure_default_lights(cast_shadow=False)
+                self.client.scene.configure_environment_map(hdri=None)
+                if self.token is None:
+                    self._start_restored(exercise)
+                else:
+                    self.gate = TokenGate(self.client.gui, self.token, self.worker,
+                                          lambda: self._enter(exercise), self.on_refused)
+            while (events := self.worker.next_events(lambda: self.saved.autosave_due)) is not None:
+                spent = time.thread_time()
+                for action in events:
+                    self._do(action)
+                if self.worker.is_due(self.saved.autosave_due):
+                    self._autosave()
+                self.worker.pace(time.thread_time() - spent)
+        except TabClosed:
+            pass
+        finally:
+            self.close()
+            if self.saved.autosave_due is not None:
+                self._autosave()                  # the last changes of a closed tab
+
+    def _do(self, action: Callable[[], None]) -> None:
+        """Run one event; an error is shown in the tab (one line), never ends the worker."""
+        try:
+            action()
+        except TabClosed:
+            raise
+        except Exception as error:  # noqa: BLE001 - any failure of one event is shown, the tab goes on
+            traceback.print_exc()
+            self._show_error(f"⚠️ That did not work: {escaped(error)}")
+
+    def _enter(self, exercise: Exercise) -> None:
+        """The class token was right: the lab replaces the gate."""
+        with self.gui_lock:
+            self.client.gui.reset()
+            self._start_restored(exercise)
+
+    # -- life cycle ------------------------------------------------------------------
+    def _start_restored(self, exercise: Exercise) -> None:
+        """Start the experiment this browser autosaved last (a reloaded tab gets its work back),
+        else ``exercise`` on its defaults (call holding ``gui_lock``)."""
+        saved = self.saved.browser_autosave(self.exercises)
+        if saved is not None:
+            recording = (saved.recording_name, saved.recording) if saved.recording is not None else None
+            try:
+                self._start(self.exercises[saved.exercise], saved.parameters, recording)
+            except (ParameterError, ValueError) as error:    # saved by an older lab: its defaults instead
+                print(f"autosave {saved.code} not restored: {error}", file=sys.stderr, flush=True)
+            else:
+                self.saved.restored_from = saved.code
+                self.saved.show_codes()
+                return
+        self._start(exercise)
+
+    def _start(self, exercise: Exercise, overrides: dict | None = None,
+               recording: tuple[str, bytes] | None = None) -> None:
+        """Show ``exercise`` (call holding ``gui_lock``): at ``overrides`` and with ``recording``
+        (a saved experiment), else on its defaults."""
+        self.worker.check_open()
+        data = exercise.load_data(*recording) if recording else None
+        values = exercise.resolve({**(overrides or {}), "data": data})
+        self.state.load(exercise, values, exercise.simulation(values), recording)
+        self.scene = exercise.scene(self.state.values)
+        self._build_gui(exercise)
+        self.controls.follow_ranges(exercise)
+        self.worker.check_open()
+        if self.scene is not None:
+            self.scene.attach(self.client.scene)
+        self.worker.check_open()
+        self._request_analysis()
+        self.stream.start()
+        self.saved.changed()
+
+    def _switch(self, exercise: Exercise, overrides: dict | None = None,
+                recording: tuple[str, bytes] | None = None) -> None:
+        """Replace the tab's lab (on the worker, so switches never overlap)."""
+        with self.gui_lock:
+            self.generation = next(self.generations)  # the old frames and analyses stop writing
+        if self.stream is not None:
+            self.stream.join(timeout=2.0)
+        # The browser applies the chart updates of a message batch after its removals (and then
+        # reports updates of removed charts): let the last updates go out in a batch of their own.
+        self.client.flush()
+        time.sleep(SETTLE_BEFORE_REMOVAL_S)
+        with self.gui_lock:
+            self.worker.check_open()
+            self.status.clear_card()              # the old exercise's stop message goes with it
+            layout.clear(self.client.gui, keep=self.docks.kept())   # docks stay
+            self.client.scene.reset()
+            self._start(exercise, overrides, recording)
+
+    def _choose(self, title: str) -> None:
+        chosen = next(e for e in self.exercises.values() if e.title == title)
+        if chosen is not self.state.exercise:
+            self._switch(chosen)
+
+    def _current(self, generation: int) -> bool:
+        """Whether ``generation`` still owns the tab's GUI (call holding ``gui_lock``)."""
+        return generation == self.generation and not self.worker.closed
+
+    def close(self) -> None:
+        """Stop the worker, simulation and analysis threads; the tab is gone (idempotent, any thread)."""
+        self.worker.close()
+        self.analysis.close()
+
+    def report(self, text: str) -> None:
+        """A one-line message for the tab from outside (e.g. a message the server refused)."""
+        self.post(("report", text), lambda: self._show_error(f"⚠️ {escaped(text)}"))
+
+    def _show_error(self, markdown: str) -> None:
+        with self.gui_lock:
+            if self.state.exercise is not None and not self.closed and self.controls.error is not None:
+                self.controls.error.content = markdown
+
+    def _show_problem(self, markdown: str) -> None:
+        if not self.closed and self.controls.error is not None:
+            self.controls.error.content = markdown
+
+    def _autosave(self) -> None:
+        if self.state.exercise is None:
+            self.saved.autosave_due = None
+            return
+        self.saved.autosave()
+
+    # -- GUI ---------------------------------------------------------------------
+    def _build_gui(self, exercise: Exercise) -> None:
+        gui, on, values = self.client.gui, self.worker.on, self.state.values
+        chooser = gui.add_dropdown("Exercise", tuple(e.title for e in self.exercises.values()),
+                                   initial_value=exercise.title,
+                                   hint="Switch this tab to another exercise (starts it on its defaults).")
+        chooser.on_update(on("exercise", lambda: self._choose(chooser.value)))
+        gui.add_markdown(f"### {exercise.title}")
+        self.status.add_line(gui)
+        buttons = gui.add_button_group("Simulation", ("Run", "Pause", "Reset"))
+        buttons.on_click(on("buttons", lambda: self._on_button(buttons.value)))
+        self.status.add_speed(gui)                # filled in while it runs
+        self.inspector = FilterInspector.add(gui, self.state.simulation, on("inspector step", self._step_one))
+        ActionPanel(gui, exercise, on, self.state.values_now, self._still_current(), self.gui_lock,
+                    self.worker, self.client, plot_chart)   # the exercise's buttons, if any
+        if self.scene is not None:
+            self.scene_view.add_control(gui, on)
+        toggle = self.docks.add_toggle(gui)
+        if exercise.data_description:
+            upload = gui.add_upload_button("Load recording (CSV)", icon=viser.Icon.UPLOAD, mime_type=".csv,text/csv",
+                                           hint=exercise.data_description)
+            upload.on_upload(on("upload", lambda: self._on_upload(upload.value)))
+        if exercise.download_label:
+            download = gui.add_button(exercise.download_label, icon=viser.Icon.DOWNLOAD)
+            download.on_click(on("download", self._on_download))
+            self.download_note = gui.add_markdown("")     # what the button did, where the student looks
+        self.controls.add(gui, exercise, values)
+        gui.add_html(scope.LEGEND_STYLE)
+        gui.add_html(entry.STYLE)
+        self.controls.add_error_line(gui)
+        self.saved.add_folder(gui, on, lambda code: self.saved.open(code, self.exercises, self._switch))
+        self.saved.show_codes()
+
+        first = self.analysis.first(exercise, values)
+        self.docks.dock(gui)
+        tabs = self.docks.tabs
+        with tabs["Scope"]:
+            live = LivePlots(gui, exercise, self.state.simulation)   # if the exercise has any
+            charts = ScopeCharts(gui, exercise.charts, self.state.columns, self.state.window_ms())
+            self.analysis.add_readouts(gui)
+            ExportButtons.add(gui, exercise, on, self._export_snapshot,
+                              lambda: self.analysis.readout_rows(self.analysis.shown_analysis),
+                              self.client.send_file_download)   # CSV and PNG for a lab report
+        with tabs["Pole map"]:
+            self.analysis.add_pole_map(gui, exercise, values, first, on)
+        with tabs["Analysis"]:
+            self.analysis.add_plots(gui, tabs["Analysis"], first)
+        self.docks.add_worksheets(gui, worksheets.current(exercise))   # claims table filled in as measured
+        self.stream = Stream(self.client, self.gui_lock, self.state, self.generation, self._current, self.scene,
+                             self.scene_view, charts, live, self.status, self.analysis.refresh_live_readouts,
+                             self.problems)
+
+        def put_beside() -> None:
+            with self.gui_lock:
+                self.docks.put_worksheet_beside(gui, toggle.value)
+        toggle.on_update(on("beside", put_beside))
+
+        def show_measured(sheet: str, generation: int = self.generation) -> None:
+            with self.gui_lock:
+                if self._current(generation):
+                    self.docks.show_worksheet(sheet)
+        worksheets.when_measured(exercise, show_measured)
+
+    def _still_current(self) -> Callable[[], bool]:
+        """Whether the generation being built still owns the tab (for parts that run on threads)."""
+        generation = self.generation
+        return lambda: self._current(generation)
+
+    def _export_snapshot(self) -> tuple:
+        """The scope buffer, values, column names and experiment code, for an export."""
+        with self.state.lock:
+            return self.state.buffer.copy(), dict(self.state.values), tuple(self.state.columns), \
+                self.saved.autosave_code
+
+    # -- events --------------------------------------------------------------------
+    def _apply(self, parameter: Parameter, value) -> None:
+        """A parameter took ``value``: the analysis, the simulation (retuned or restarted) and
+        the 3D view follow."""
+        lab = self.state
+        self.scene_view.hold()
+        with lab.lock:
+            lab.values[parameter.name] = value
+        self.saved.changed()
+        if parameter.name == "time_scale":
+            return
+        self._request_analysis()                  # readouts first: they are what the student watches
+        with lab.lock:
+            if parameter.name == "seed" or lab.simulation.status_message():
+                lab.reset()                       # a stopped run is not carried on (it touched down)
+            else:
+                step_s = lab.simulation.sample_time_s
+                lab.simulation = lab.exercise.retune(lab.simulation, lab.values)
+                if lab.simulation.sample_time_s != step_s:
+                    lab.buffer = lab.buffer[:0]   # the scope's rows assume one sample time
+        if self.scene is not None:
+            try:
+                self.scene.update(dict(lab.values))
+            except Exception as error:  # noqa: BLE001 - the 3D view is not worth the lab
+                self.problems.report("3D view", error)
+
+    def _on_upload(self, uploaded) -> None:
+        lab = self.state
+        try:
+            data = lab.exercise.load_data(uploaded.name, uploaded.content)
+        except ParameterError as error:
+            named = str(error) if uploaded.name in str(error) else f"{uploaded.name}: {error}"
+            self.controls.error.content = f"⚠️ {escaped(named)}"
+            return
+        self.controls.error.content = f"Loaded {escaped(uploaded.name)}."
+        with lab.lock:
+            lab.values["data"] = data
+            lab.reset()
+        lab.recording = (uploaded.name, uploaded.content)
+        self.controls.follow_ranges(lab.exercise)
+        self.saved.changed()
+        self._request_analysis()
+
+    def _on_download(self) -> None:
+        """Make the file; the note under the button says what happened (issue 11, defect 5: the
+        reason a recording failed used to appear below the fold of the left panel)."""
+        self.download_note.content = "*Preparing the file …*"
+        self.client.flush()
+        try:
+            filename, content = self.state.exercise.download(self.state.values_now())
+        except ParameterError as error:
+            self.download_note.content = f"⚠️ {escaped(error)}"
+            return
+        self.client.send_file_download(filename, content, save_immediately=True)
+        self.download_note.content = f"Sent {escaped(filename)} ({len(content) / 1e3:.0f} kB)."
+
+    def _on_button(self, which: str) -> None:
+        lab = self.state
+        with lab.lock:
+            if which == "Reset" or which == "Run" and lab.simulation.status_message():
+                lab.reset()
+            lab.running = which != "Pause"
+        with self.gui_lock:
+            if which != "Pause" and not self.stream.alive() and not self.closed:
+                self.stream.start()               # never left without a simulation
+            self.problems.seen.clear()
+            self.status.line.content = RUNNING if lab.running else PAUSED
+            if not lab.running:
+                self.status.speed.content = ""
+            self._refresh_inspector()
+
+    def _step_one(self) -> None:
+        """The filter inspector's step: pause, advance one sample, draw it and show the filter."""
+        message = self.state.step_one()
+        with self.gui_lock:
+            if self.closed:
+                return
+            self.status.line.content = (f"**Stopped: {message}** Press Run or Reset to start again." if message
+                                        else "**Paused** (stepping one sample at a time)")
+            self.stream.draw(time.perf_counter())
+            self._refresh_inspector()
+
+    def _refresh_inspector(self) -> None:
+        """The inspector shows the filter at the newest sample while paused (call holding ``gui_lock``)."""
+        if self.inspector is not None and not self.closed:
+            with self.state.lock:
+                running, simulation = self.state.running, self.state.simulation
+                self.inspector.show(running, simulation)
+
+    def _request_analysis(self) -> None:
+        """Ask the analysis thread for the current values; a newer request supersedes an older one."""
+        self.analysis.ask(self.generation, self.state.exercise, self.state.values_now())

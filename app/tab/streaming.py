@@ -1,0 +1,151 @@
+"""A tab's simulation on the process's shared frame clock (``app.tab.frames``): every frame
+advances the simulation by the time passed, draws the scope and live plots, follows with
+the 3D view and the readouts of the scope window, and reports a stop."""
+
+from __future__ import annotations
+
+import time
+import traceback
+from collections.abc import Callable
+
+from app.panels import status as status_texts
+from app.panels.live import LivePlots
+from app.panels.scene_view import SceneView
+from app.panels.scope_charts import ScopeCharts
+from app.panels.status import SimulationStatus
+from app.panels.text import escaped
+from app.tab import frames
+from app.tab.state import LabState
+
+LIVE_READOUT_PERIOD_S = 1.0       # the readouts of the scope window follow the running simulation
+FRAME_LOCK_WAIT_S = 0.005         # a frame waits this long for its tab's locks, then skips
+
+
+class Problems:
+    """Errors of the simulation thread or the 3D view: each shown once in the tab, logged once."""
+
+    def __init__(self, gui_lock, show: Callable[[str], None]):
+        self.gui_lock, self.show = gui_lock, show
+        self.seen: set[str] = set()
+
+    def report(self, where: str, error: Exception) -> None:
+        text = f"{where}: {type(error).__name__}: {error}"
+        if text in self.seen:
+            return
+        self.seen.add(text)
+        traceback.print_exception(error)
+        with self.gui_lock:
+            self.show(f"⚠️ {escaped(text)} (the simulation goes on)")
+
+
+class Stream:
+    """One exercise's frames in one tab (one generation)."""
+
+    def __init__(self, client, gui_lock, state: LabState, generation: int, is_current: Callable[[int], bool],
+                 scene, scene_view: SceneView, scope: ScopeCharts, live: LivePlots, status: SimulationStatus,
+                 refresh_readouts: Callable[[], None], problems: Problems):
+        self.client, self.gui_lock, self.state = client, gui_lock, state
+        self.generation, self.is_current = generation, is_current
+        self.scene, self.scene_view, self.scope, self.live = scene, scene_view, scope, live
+        self.status, self.refresh_readouts, self.problems = status, refresh_readouts, problems
+        self.stop_shown: tuple | None = None       # (message, simulation) of a stop not shown yet
+        self.ticker: frames.Ticker | None = None
+
+    def start(self) -> None:
+        """Put this generation's simulation on the process's frame clock (``frames.CLOCK``)."""
+        self.ticker = frames.CLOCK.add(self._step_function(), name=f"lab-{self.client.client_id}")
+
+    def alive(self) -> bool:
+        return self.ticker is not None and self.ticker.is_alive()
+
+    def join(self, timeout: float) -> None:
+        if self.ticker is not None:
+            self.ticker.join(timeout)
+
+    def _step_function(self) -> Callable[[float], bool]:
+        """The simulation's frame step: advances, draws and animates until the tab closes or
+        shows another exercise; an error in one frame is reported and the next frame goes on."""
+        state = [0.0, time.perf_counter(), 0.0, 0.0]      # carry, last frame, next scene, next readouts
+
+        def step(now: float) -> bool:
+            if not self.is_current(self.generation):
+                return False
+            carry, last, next_scene, next_readouts = state
+            try:
+                # one wake-up of the event loop for the frame's messages (3D view, scope, readouts),
+                # not one per message: each wake-up is a system call
+                with self.client.atomic():
+                    state[0], state[2], state[3] = self._frame(now, now - last, carry, next_scene, next_readouts)
+            except Exception as error:  # noqa: BLE001 - reported; the next frame goes on
+                self.problems.report("simulation", error)
+            state[1] = now
+            return True
+        return step
+
+    def _frame(self, now: float, elapsed: float, carry: float,
+               next_scene: float, next_readouts: float) -> tuple[float, float, float]:
+        """One display frame: advance, draw, 3D view; returns the carried state.
+
+        Runs on a frame thread shared with other tabs, so it waits at most
+        ``FRAME_LOCK_WAIT_S`` for this tab's locks: while the worker or the analysis holds
+        them longer (an exercise being built, a retune), the frame is skipped and the next
+        one catches up (the simulated time is carried)."""
+        lab = self.state
+        if self.scene is not None and self.scene_view.due(now, next_scene) \
+                and self.gui_lock.acquire(timeout=FRAME_LOCK_WAIT_S):
+            try:                                  # the scene belongs to this generation only
+                next_scene = now + self.scene_view.period_s()
+                if self.is_current(self.generation):
+                    try:
+                        self.scene.animate(now, lab.latest())
+                    except Exception as error:  # noqa: BLE001 - the 3D view is not worth the simulation
+                        self.problems.report("3D view", error)
+            finally:
+                self.gui_lock.release()
+        if lab.running:                           # the simulation's own step: a retune may change it
+            carry += lab.values.get("time_scale", 1.0) * elapsed / lab.simulation.sample_time_s
+        if not lab.lock.acquire(timeout=FRAME_LOCK_WAIT_S):
+            return carry, next_scene, next_readouts
+        try:
+            if not lab.running:
+                return 0.0, next_scene, next_readouts
+            steps, carry = int(carry), carry - int(carry)
+            meter = self.status.meter
+            timed = meter.timed()                 # a CPU-clock read is a system call: not every frame
+            started = time.thread_time() if timed else 0.0
+            trace = lab.simulation.advance(steps)
+            meter.add(steps * lab.simulation.sample_time_s, time.thread_time() - started if timed else None,
+                      elapsed)
+            lab.append(trace)
+            message = lab.simulation.status_message()
+            if message:
+                lab.running = False
+                self.stop_shown = (message, lab.simulation)
+        finally:
+            lab.lock.release()
+        if not self.gui_lock.acquire(timeout=FRAME_LOCK_WAIT_S):
+            return carry, next_scene, next_readouts
+        try:
+            if not self.is_current(self.generation):
+                return carry, next_scene, next_readouts
+            self.draw(now)
+            if now >= next_readouts:
+                self.refresh_readouts()
+                self.status.speed.content = self.status.meter.text(lab.values.get("time_scale", 1.0))
+                next_readouts = now + LIVE_READOUT_PERIOD_S
+            stop, self.stop_shown = self.stop_shown, None
+            if stop is not None:
+                message, stopped = stop
+                if lab.simulation is stopped and not lab.running:   # not reset meanwhile
+                    self.status.line.content = status_texts.stopped(message)
+                    self.status.notify_stop(message)
+        finally:
+            self.gui_lock.release()
+        return carry, next_scene, next_readouts
+
+    def draw(self, now: float) -> None:
+        """The scope and live plots at the newest samples (call holding ``gui_lock``)."""
+        lab = self.state
+        self.scope.draw(lab.buffer, lab.simulation.sample_time_s, lab.window_ms(), now,
+                        closed=lambda: not self.is_current(self.generation))
+        self.live.draw(lab.simulation, now, self.scope.drawn_until)
