@@ -28,23 +28,25 @@ AMPLIFIER_NOISE_A = 1e-3
 P = Parameter
 
 # -- the plant's noise -----------------------------------------------------------------------
-SENSOR_NOISE = P("sensor_noise_um", "Position sensor noise σ", "µm", round(PAPER_SENSOR_NOISE_UM, 4), 0.0, 10.0,
-                 "Standard deviation of the position sensor's white noise (paper eq. 16: 1.33 µm).",
-                 step=0.01, group="Noise")
-CURRENT_NOISE = P("current_noise_a", "Current sensor noise σ", "A", round(PAPER_CURRENT_NOISE_A, 4), 0.0, 5.0,
-                  "Standard deviation of the current sensor's white noise (paper eq. 16: 1.87 A).",
-                  step=0.01, group="Noise")
-DISTURBANCE_FORCE = P("disturbance_force_n", "Unmodelled force σ", "N", DISTURBANCE_FORCE_N, 0.0, 50.0,
-                      "Random force on the rotor, per 50 µs sample (the plant's process noise).",
-                      step=0.1, group="Noise")
-PLANT_NOISE = (SENSOR_NOISE, CURRENT_NOISE, DISTURBANCE_FORCE)
+PLANT_NOISE = (
+    P("sensor_noise_um", "Position sensor noise σ", "µm", round(PAPER_SENSOR_NOISE_UM, 4), 0.0, 10.0,
+      "Standard deviation of the position sensor's white noise (paper eq. 16: 1.33 µm).",
+      step=0.01, group="Noise"),
+    P("current_noise_a", "Current sensor noise σ", "A", round(PAPER_CURRENT_NOISE_A, 4), 0.0, 5.0,
+      "Standard deviation of the current sensor's white noise (paper eq. 16: 1.87 A).",
+      step=0.01, group="Noise"),
+    P("disturbance_force_n", "Unmodelled force σ", "N", DISTURBANCE_FORCE_N, 0.0, 50.0,
+      "Random force on the rotor, per 50 µs sample (the plant's process noise).",
+      step=0.1, group="Noise"),
+)
 
 # -- the linear Kalman filter's measurement variances (eq. 16) -------------------------------------
 FILTER_R_POSITION = P("filter_r_position", "Filter R_x", "V²", 7.1e-4, 1e-7, 1e-1,
                       "Filter's position-measurement variance (eq. 16: 7.1e-4 V²).", log=True,
                       group="Kalman filter")
 FILTER_R_CURRENT = P("filter_r_current", "Filter R_i", "V²", 1.4e-1, 1e-4, 10.0,
-                     "Filter's current-measurement variance (eq. 16: 0.14 V²).", log=True, group="Kalman filter")
+                     "Filter's current-measurement variance (eq. 16: 0.14 V²).", log=True,
+                     group="Kalman filter")
 
 # -- the extended Kalman filters' noise (§III, eq. 16-17) ------------------------------------------
 EKF_VARIANCES = (
