@@ -46,10 +46,11 @@ def part_of(module: str) -> str:
     return "foundation" if parts[1] in FOUNDATION else parts[1]
 
 
-def project_imports(path: pathlib.Path):
-    """Dotted names of every project module that ``path`` imports (relative imports resolved)."""
+def project_imports(path: pathlib.Path, source: str | None = None):
+    """Dotted names of every project module that ``path`` imports (relative imports resolved),
+    function-local imports included; ``source`` stands in for the file's text."""
     package = list(path.relative_to(ROOT).with_suffix("").parts)[:-1]
-    for node in ast.walk(ast.parse(path.read_text())):
+    for node in ast.walk(ast.parse(path.read_text() if source is None else source)):
         if isinstance(node, ast.ImportFrom):
             base = package[: len(package) - node.level + 1] if node.level else []
             module = ".".join(base + ([node.module] if node.module else []))
@@ -150,3 +151,41 @@ def test_the_checker_sees_a_violation(tmp_path):
     assert part_of("lab_modules.analysis") in ALLOWED["plants"]
     assert part_of("app.tab.session") not in ALLOWED["app.commands"]
     assert part_of("app.cli") not in ALLOWED["app.panels"]
+
+
+# -- exercises stand alone ------------------------------------------------------------------
+EXERCISES = ROOT / "lab_modules" / "exercises"
+#: Exercise modules: every file of the package but its ``__init__`` and the helpers (``_name.py``).
+EXERCISE_MODULES = {path.stem for path in EXERCISES.glob("*.py") if not path.stem.startswith("_")}
+
+
+def exercises_imported(path: pathlib.Path, source: str | None = None) -> set[str]:
+    """The exercise modules other than its own that the module at ``path`` imports, at any depth
+    (an imported name ``lab_modules.exercises.X`` counts when X is an exercise module: the
+    package's own names such as ``Chart`` and the helpers do not)."""
+    found = set()
+    for name in project_imports(path, source):
+        parts = name.split(".")
+        if parts[:2] == ["lab_modules", "exercises"] and len(parts) > 2 and parts[2] in EXERCISE_MODULES:
+            found.add(parts[2])
+    return found - {path.stem}
+
+
+@pytest.mark.parametrize("path", sorted(p for p in EXERCISES.glob("*.py") if p.stem != "__init__"),
+                         ids=lambda p: p.name)
+def test_no_exercise_imports_another(path):
+    """Changing one exercise's defaults or helpers never changes another: what several share
+    lives in a helper module (``_name.py``) or in a lower layer."""
+    assert not exercises_imported(path), f"{path.name} imports {sorted(exercises_imported(path))}"
+
+
+def test_the_exercise_checker_sees_an_import_inside_a_function():
+    inside = "def f():\n    from lab_modules.exercises.kalman_noise import setup\n"
+    relative = "from .ekf_parameters import linear_axis\n"
+    package = "from lab_modules.exercises import Chart, _common, kalman_noise\n"
+    helper = EXERCISES / "_common.py"
+    assert exercises_imported(EXERCISES / "lqg_vs_pid.py", inside) == {"kalman_noise"}
+    assert exercises_imported(EXERCISES / "ekf_disturbance.py", relative) == {"ekf_parameters"}
+    assert exercises_imported(EXERCISES / "lqg_vs_pid.py", package) == {"kalman_noise"}
+    assert exercises_imported(helper, package) == {"kalman_noise"}
+    assert exercises_imported(EXERCISES / "kalman_noise.py", package) == set()

@@ -21,8 +21,10 @@ from lab_modules.controllers.lqr import (
     lqr,
 )
 from lab_modules.exercises import lqg_vs_pid
-from lab_modules.exercises.lqg_vs_pid import EXERCISE, SideBySide, column, setups, step_response
+from lab_modules.exercises.lqg_vs_pid import EXERCISE, setups
 from lab_modules.loops.radial_axis_experiment import AxisSimulation
+from lab_modules.loops.radial_axis_side_by_side import SideBySide
+from lab_modules.loops.radial_axis_step_tests import column, step_response
 from lab_modules.plants.radial_bearing import RIG
 
 T = RIG.sample_time_s

@@ -105,3 +105,10 @@ def lqr(state_weights, control_weight: float, rig: BearingAxis = RIG) -> StateFe
     gain, _, _ = control.dlqr(A_aug, B_aug, np.diag(state_weights), [[control_weight]])
     gain = np.asarray(gain)[0]
     return StateFeedback(tuple(float(g) for g in gain[:3]), float(-gain[3]))
+
+
+def gain_deviation(designed: StateFeedback, printed: StateFeedback) -> float:
+    """Largest relative difference between two regulators' four gains (K, K_I)."""
+    a = np.array([*designed.state_gain, designed.integral_gain_v_per_m_s])
+    b = np.array([*printed.state_gain, printed.integral_gain_v_per_m_s])
+    return float(np.max(np.abs(a / b - 1.0)))

@@ -1,8 +1,8 @@
-"""What several exercises build from the same sliders.
+"""What several exercises build from the same sliders, and how they name poles and report them.
 
 The controller sliders pid_gain, integral_time_ms, derivative_time_ms and
-derivative_filter_us are ``kalman_noise``'s, shared by the exercises that run
-the paper's PID (paper 000, §IV).
+derivative_filter_us are the paper's PID (paper 000, §IV), defined once in
+``_radial_axis_controls`` for the exercises that run it.
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ import numpy as np
 
 from lab_modules import analysis
 from lab_modules.controllers.pid import pid
+from lab_modules.loops.radial_axis_experiment import AxisSetup
 from lab_modules.plants.radial_bearing import RIG
 
 #: ``controllers.pid`` remembered per setting: its Tustin discretisation takes
@@ -39,6 +40,22 @@ def ekf_loop_fields(values: dict) -> dict:
             "sensor_noise_m": values["sensor_noise_um"] * 1e-6,
             "current_noise_a": values["current_noise_a"],
             "process_force_n": values["disturbance_force_n"]}
+
+
+def linear_axis(values: dict) -> AxisSetup:
+    """The linear loop the EKF exercises' pole maps show (issue 11, defect 9): the PID on the rig's
+    linear model (eq. 3-4) and the EKF's physical part (x, v, i) as a steady-state Kalman filter with
+    the same q_22, q_33 and R, k_i and k_x held at their rated values.  The parameter states are random
+    walks whose error poles sit near s = 0 and move with the excitation: not shown."""
+    return AxisSetup(controller=pid_from_values(values), use_estimate=values["feedback"] == "estimated",
+                     sensor_lag_s=values["sensor_lag_us"] * 1e-6, filter_q_velocity=values["filter_q_velocity"],
+                     filter_q_current=values["filter_q_current"], filter_r_position=values["filter_r_position"],
+                     filter_r_current=values["filter_r_current"])
+
+
+def pairs(values) -> list[list[float]]:
+    """Complex numbers as [re, im] pairs for JSON."""
+    return [[float(v.real), float(v.imag)] for v in np.sort_complex(np.asarray(values, dtype=complex))]
 
 
 # -- pole names for the pole map (``Exercise.mode_names``) ----------------------------------

@@ -37,8 +37,7 @@ from lab_modules import analysis
 from lab_modules.claims import Claim
 from lab_modules.estimators.scheduled_kalman import model_matrices, process_noise
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
-from lab_modules.exercises.stiffness_map import PARAMETERS as MAP_PARAMETERS
-from lab_modules.exercises.stiffness_map import networks
+from lab_modules.exercises._stiffness_networks import FBFNN_EPOCHS, FBFNN_RATE, NETWORK_DEFAULTS, networks
 from lab_modules.loops.axial_bearing_loop import (
     COLUMNS,
     FILTERS,
@@ -64,7 +63,6 @@ WINDOWS = ((0.2, 0.3), (0.5, 0.6))
 LABELS = {"fixed": "fixed k_i, k_s", "fbfnn": "scheduled (FBFNN)", "lsm": "scheduled (exact LSM)",
           "ekf": "EKF (force law eq. 1)"}
 COLORS = {"fixed": "#ff7f0e", "fbfnn": "#d62728", "lsm": "#9467bd", "ekf": "#2ca02c"}
-_map = {p.name: p for p in MAP_PARAMETERS}
 
 P = Parameter
 PARAMETERS = (
@@ -97,18 +95,17 @@ PARAMETERS = (
     P("sensor_lag_us", "Sensor lag T_Sen", "µs", SENSOR_LAG_S * 1e6, 10.0, 1000.0,
       "First-order sensor lag, eq. 18, in plant and filter (not in the paper).", step=10.0,
       group="Kalman filter"),
-    _map["fbfnn_epochs"], _map["fbfnn_rate"],
+    FBFNN_EPOCHS, FBFNN_RATE,
     P("seed", "Noise seed", "", 1, 0, 1_000_000, "Seed of the noise generators.", integer=True, group="Run"),
     P("time_scale", "Time scale", "×", 0.1, 0.001, 1.0,
       "Simulated seconds per wall-clock second in the live view.", log=True, group="Run"),
 )
 
-MAP_DEFAULTS = {p.name: p.default for p in MAP_PARAMETERS}
-
 
 def fbfnn(values: dict):
-    """The networks of ``stiffness_map`` at its defaults, trained with these epochs and rate."""
-    return networks({**MAP_DEFAULTS, "fbfnn_epochs": values["fbfnn_epochs"], "fbfnn_rate": values["fbfnn_rate"]})
+    """The networks of ``stiffness_map`` at its controls' defaults, trained with these epochs and rate."""
+    return networks({**NETWORK_DEFAULTS, "fbfnn_epochs": values["fbfnn_epochs"],
+                     "fbfnn_rate": values["fbfnn_rate"]})
 
 
 def setup(values: dict) -> LoopSetup:

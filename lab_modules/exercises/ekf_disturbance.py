@@ -53,10 +53,15 @@ from lab_modules.exercises._common import (
     axis_mode_matrices,
     axis_plant_names,
     ekf_loop_fields,
+    linear_axis,
 )
-from lab_modules.exercises.ekf_parameters import PARAMETERS as EKF_PARAMETERS_EXERCISE_PARAMETERS
-from lab_modules.exercises.ekf_parameters import linear_axis
-from lab_modules.exercises.kalman_noise import PARAMETERS as NOISE_EXERCISE_PARAMETERS
+from lab_modules.exercises._radial_axis_controls import (
+    EKF_VARIANCES,
+    PAPER_PID,
+    PLANT_NOISE,
+    SEED,
+    TIME_SCALE,
+)
 from lab_modules.loops.radial_axis_ekf_loop import (
     EKFLoopSetup,
     EKFLoopSimulation,
@@ -81,8 +86,6 @@ FIG_4_WINDOW_S = (0.005, 0.06)        # shown before and after the step
 #: the pole set of the linearised closed loop (and of its root locus)
 CLOSED_LOOP = "closed loop (linearised)"
 
-_shared = {p.name: p for p in NOISE_EXERCISE_PARAMETERS}
-_ekf = {p.name: p for p in EKF_PARAMETERS_EXERCISE_PARAMETERS}      # same filter noise sliders
 P = Parameter
 PARAMETERS = (
     P("experiment", "Experiment", "", "force_step", choices=("force_step", "gap_sweep"),
@@ -102,11 +105,11 @@ PARAMETERS = (
     P("filter_q_force", "Filter q_55 (f_z)", "N²", 1.0, 1e-4, 1e4,
       "Process noise of f_z per sample (eq. 17: 1 N²); larger: faster, noisier estimate (Fig. 4).",
       log=True, group="Extended Kalman filter"),
-    _ekf["filter_q_velocity"], _ekf["filter_q_current"], _ekf["filter_r_position"], _ekf["filter_r_current"],
+    *EKF_VARIANCES,
     P("filter_sensor_lag_us", "Filter's T_mx", "µs", DEFAULT_SENSOR_LAG_S * 1e6, 50.0, 1000.0,
       "Sensor lag assumed by the filter, eq. 12 (not in the paper; 200 µs).", step=10.0,
       group="Extended Kalman filter"),
-    _shared["sensor_noise_um"], _shared["current_noise_a"], _shared["disturbance_force_n"],
+    *PLANT_NOISE,
     P("sensor_lag_us", "Plant's sensor lag T_mx", "µs", DEFAULT_SENSOR_LAG_S * 1e6, 0.0, 1000.0,
       "The position sensor's true lag, eq. 12 (not in the paper; 200 µs).", step=10.0, group="Plant"),
     P("feedback", "Feedback source", "", "estimated", choices=("measured", "estimated"),
@@ -115,9 +118,9 @@ PARAMETERS = (
     P("feedforward", "Force feedforward", "", "off", choices=("off", "on"),
       description="Add -f_z_hat / (k_i K_a) to the amplifier reference (the disturbance feedforward "
                   "proposed after Fig. 4).", group="Controller"),
-    _shared["pid_gain"], _shared["integral_time_ms"], _shared["derivative_time_ms"],
-    _shared["derivative_filter_us"], _shared["seed"],
-    replace(_shared["time_scale"], default=0.1),   # a scope window of 0.5 s
+    *PAPER_PID,
+    SEED,
+    replace(TIME_SCALE, default=0.1),   # a scope window of 0.5 s
 )
 
 

@@ -43,9 +43,15 @@ from lab_modules.exercises._common import (
     axis_mode_matrices,
     axis_plant_names,
     ekf_loop_fields,
-    pid_from_values,
+    linear_axis,
 )
-from lab_modules.exercises.kalman_noise import PARAMETERS as NOISE_EXERCISE_PARAMETERS
+from lab_modules.exercises._radial_axis_controls import (
+    EKF_VARIANCES,
+    PAPER_PID,
+    PLANT_NOISE,
+    SEED,
+    TIME_SCALE,
+)
 from lab_modules.loops.radial_axis_ekf_loop import (
     EKFLoopSetup,
     EKFLoopSimulation,
@@ -66,7 +72,6 @@ INITIAL_SIGMA_FRACTION = 0.3
 TRUTH_WINDOW_S = 0.1
 CONVERGED_PERCENT = 5.0
 
-_shared = {p.name: p for p in NOISE_EXERCISE_PARAMETERS}
 P = Parameter
 PARAMETERS = (
     P("prbs_amplitude_um", "PRBS amplitude", "µm", 8.0, 0.0, 30.0,
@@ -88,24 +93,16 @@ PARAMETERS = (
       log=True, group="Extended Kalman filter"),
     P("filter_q_kx", "Filter q_kx", "(N/m)²", 1e2, 1e-4, 1e8,
       "Process noise of k_x per sample (not in the paper).", log=True, group="Extended Kalman filter"),
-    P("filter_q_velocity", "Filter q_22 (v)", "m²/s²", 2.6e-10, 1e-16, 1e-6,
-      "Process noise of v per sample (eq. 17: 2.6e-10 m²/s²).", log=True, group="Extended Kalman filter"),
-    P("filter_q_current", "Filter q_33 (i)", "A²", 1e-3, 1e-8, 1.0,
-      "Process noise of i per sample (eq. 17: 0.43 A² on the rig; lab default 1e-3 A², see worksheet).",
-      log=True, group="Extended Kalman filter"),
-    P("filter_r_position", "Filter R_x", "V²", 7.1e-4, 1e-7, 1e-1,
-      "Position-measurement variance (eq. 16: 7.1e-4 V²).", log=True, group="Extended Kalman filter"),
-    P("filter_r_current", "Filter R_i", "V²", 1.4e-1, 1e-4, 10.0,
-      "Current-measurement variance (eq. 16: 0.14 V²).", log=True, group="Extended Kalman filter"),
-    _shared["sensor_noise_um"], _shared["current_noise_a"], _shared["disturbance_force_n"],
+    *EKF_VARIANCES,
+    *PLANT_NOISE,
     P("sensor_lag_us", "Sensor lag T_mx", "µs", 0.0, 0.0, 1000.0,
       "Plant's position-sensor lag, eq. 12 (eq. 9 has none; the rig's is about 200 µs).",
       step=10.0, group="Plant"),
     P("feedback", "Feedback source", "", "measured", choices=("measured", "estimated"),
       description="Position the PID acts on: the sensor's or the filter's estimate.", group="Controller"),
-    _shared["pid_gain"], _shared["integral_time_ms"], _shared["derivative_time_ms"],
-    _shared["derivative_filter_us"], _shared["seed"],
-    replace(_shared["time_scale"], default=0.2),   # a scope window of 1 s
+    *PAPER_PID,
+    SEED,
+    replace(TIME_SCALE, default=0.2),   # a scope window of 1 s
 )
 
 
@@ -122,17 +119,6 @@ def setup(values: dict, excitation: bool = True) -> EKFLoopSetup:
         plant_sensor_lag_s=values["sensor_lag_us"] * 1e-6,
         **ekf_loop_fields(values),
         reference=Prbs(amplitude, values["prbs_bit_time_ms"] * 1e-3, values["reference_offset_um"] * 1e-6))
-
-
-def linear_axis(values: dict) -> AxisSetup:
-    """The linear loop the pole map shows (issue 11, defect 9): the PID on the rig's linear model
-    (eq. 3-4) and the EKF's physical part (x, v, i) as a steady-state Kalman filter with the same
-    q_22, q_33 and R, k_i and k_x held at their rated values.  The parameter states are random
-    walks whose error poles sit near s = 0 and move with the excitation: not shown."""
-    return AxisSetup(controller=pid_from_values(values), use_estimate=values["feedback"] == "estimated",
-                     sensor_lag_s=values["sensor_lag_us"] * 1e-6, filter_q_velocity=values["filter_q_velocity"],
-                     filter_q_current=values["filter_q_current"], filter_r_position=values["filter_r_position"],
-                     filter_r_current=values["filter_r_current"])
 
 
 def linear_poles(axis: AxisSetup) -> dict[str, np.ndarray]:

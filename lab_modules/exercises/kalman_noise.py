@@ -24,77 +24,55 @@ import numpy as np
 from lab_modules import analysis
 from lab_modules.claims import Claim
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
-from lab_modules.exercises._common import axis_mode_matrices, axis_plant_names, pid_from_values
+from lab_modules.exercises._common import axis_mode_matrices, axis_plant_names, pairs, pid_from_values
+from lab_modules.exercises._radial_axis_controls import (
+    AMPLIFIER_NOISE_A,
+    DISTURBANCE_FORCE_N,
+    FILTER_R_CURRENT,
+    FILTER_R_POSITION,
+    FORCE_LAW,
+    PAPER_PID,
+    PLANT_NOISE,
+    SEED,
+    SENSOR_LAG,
+    TIME_SCALE,
+)
 from lab_modules.loops.radial_axis_experiment import AxisSetup, AxisSimulation
 from lab_modules.loops.radial_axis_loop import TRACE_COLUMNS
 from lab_modules.parameters import Parameter
-from lab_modules.plants.radial_bearing import DEFAULT_SENSOR_LAG_S, RIG
+from lab_modules.plants.radial_bearing import RIG
 from lab_modules.scenes.bearing import ESTIMATE_RED, MEASURED_GREY, BearingScene, Ghost
 
 T = RIG.sample_time_s
-K_MX = RIG.position_sensor_gain_v_per_m
-K_MI = RIG.current_sensor_gain_v_per_a
-#: eq. 16: R = diag(7.1e-4 V^2, 1.4e-1 V^2) -> sensor noise in physical units
-PAPER_SENSOR_NOISE_UM = np.sqrt(7.1e-4) / K_MX * 1e6      # 1.33 µm
-PAPER_CURRENT_NOISE_A = np.sqrt(1.4e-1) / K_MI            # 1.87 A
-#: The plant's unmodelled force disturbance (per sample).  The paper does not
-#: give one; 0.5 N is small against the sensor noise, as the paper's Fig. 3
-#: implies (the filter removes most of the motion, so noise dominated it).
-DISTURBANCE_FORCE_N = 0.5
-AMPLIFIER_NOISE_A = 1e-3
 MATCHED_Q_VELOCITY = (DISTURBANCE_FORCE_N * T / RIG.equivalent_mass_kg) ** 2
 
 P = Parameter
 PARAMETERS = (
-    P("sensor_noise_um", "Position sensor noise σ", "µm", round(PAPER_SENSOR_NOISE_UM, 4), 0.0, 10.0,
-      "Standard deviation of the position sensor's white noise (paper eq. 16: 1.33 µm).",
-      step=0.01, group="Noise"),
-    P("current_noise_a", "Current sensor noise σ", "A", round(PAPER_CURRENT_NOISE_A, 4), 0.0, 5.0,
-      "Standard deviation of the current sensor's white noise (paper eq. 16: 1.87 A).",
-      step=0.01, group="Noise"),
-    P("disturbance_force_n", "Unmodelled force σ", "N", DISTURBANCE_FORCE_N, 0.0, 50.0,
-      "Random force on the rotor, per 50 µs sample (the plant's process noise).",
-      step=0.1, group="Noise"),
+    *PLANT_NOISE,
     P("filter_q_velocity", "Filter Q_vv", "m²/s²", MATCHED_Q_VELOCITY, 1e-16, 1e-6,
       "Filter's process-noise variance on v per sample (eq. 17's q_22); default matches the plant.",
       log=True, group="Kalman filter"),
     P("filter_q_current", "Filter Q_ii", "A²", AMPLIFIER_NOISE_A**2, 1e-10, 1.0,
       "Filter's process-noise variance on i per sample (eq. 17's q_33); default matches the plant.",
       log=True, group="Kalman filter"),
-    P("filter_r_position", "Filter R_x", "V²", 7.1e-4, 1e-7, 1e-1,
-      "Filter's position-measurement variance (eq. 16: 7.1e-4 V²).", log=True, group="Kalman filter"),
-    P("filter_r_current", "Filter R_i", "V²", 1.4e-1, 1e-4, 10.0,
-      "Filter's current-measurement variance (eq. 16: 0.14 V²).", log=True, group="Kalman filter"),
+    FILTER_R_POSITION,
+    FILTER_R_CURRENT,
     P("feedback", "Feedback source", "", "measured", choices=("measured", "estimated"),
       description="Position the PID acts on: the sensor's or the filter's (undelayed) estimate.",
       group="Controller"),
     P("gain_factor", "Common gain factor", "×", 1.0, 0.1, 4.0,
       "Multiplies the PID gain K (paper: +75 % possible with the filter).", step=0.01, group="Controller"),
-    P("pid_gain", "PID gain K", "V/V", 0.65, 0.05, 5.0,
-      "Proportional gain on the sensor voltage (paper §IV: 0.65).", step=0.01, group="Controller"),
-    P("integral_time_ms", "Integral time T_I", "ms", 50.0, 1.0, 1000.0,
-      "PID integral time (paper §IV: 50 ms).", step=1.0, group="Controller"),
-    P("derivative_time_ms", "Derivative time T_D", "ms", 3.0, 0.1, 20.0,
-      "PID derivative time (paper §IV: 3 ms).", step=0.1, group="Controller"),
-    P("derivative_filter_us", "Derivative filter τ", "µs", 300.0, 50.0, 3000.0,
-      "Time constant of the derivative's first-order filter (not in the paper: T_D/10).",
-      step=10.0, group="Controller"),
-    P("force_law", "Plant force law", "", "nonlinear", choices=("nonlinear", "linear"),
-      description="True plant: eq. 10 (nonlinear) or its linearisation eq. 3.", group="Plant"),
-    P("sensor_lag_us", "Sensor lag T_mx", "µs", DEFAULT_SENSOR_LAG_S * 1e6, 0.0, 1000.0,
-      "Position sensor's demodulator lag, eq. 12 (not in the paper; 0 = ideal sensor).",
-      step=10.0, group="Plant"),
+    *PAPER_PID,
+    FORCE_LAW,
+    SENSOR_LAG,
     P("reference_step_um", "Reference step", "µm", 0.0, -100.0, 100.0,
       "Amplitude of a square-wave reference position.", step=1.0, group="Excitation"),
     P("disturbance_step_n", "Disturbance force step", "N", 0.0, -400.0, 400.0,
       "Amplitude of a square-wave disturbance force f_z (eq. 11).", step=10.0, group="Excitation"),
     P("step_period_ms", "Step period", "ms", 100.0, 10.0, 1000.0,
       "Period of the reference and disturbance square waves.", step=10.0, group="Excitation"),
-    P("seed", "Random seed", "", 0, 0, 2**31 - 1, "Seed of this lab's noise.", integer=True,
-      step=1, group="Run"),
-    P("time_scale", "Time scale", "×", 0.01, 0.001, 1.0,
-      "Simulated seconds per wall-clock second in the browser (1 = real time).",
-      log=True, group="Run"),
+    SEED,
+    TIME_SCALE,
 )
 
 SPECTRUM_POINTS = 200            # log-spaced frequencies of the motion spectrum, 1 Hz to Nyquist
@@ -146,11 +124,6 @@ def motion_spectrum(axis: AxisSetup) -> Plot:
                                  ("rotor, measured feedback", rotor["measured"], "#1f77b4"),
                                  ("rotor, estimated feedback", rotor["estimated"], "#d62728")),
                 log_x=True, log_y=True)
-
-
-def pairs(values) -> list[list[float]]:
-    """Complex numbers as [re, im] pairs for JSON."""
-    return [[float(v.real), float(v.imag)] for v in np.sort_complex(np.asarray(values, dtype=complex))]
 
 
 #: The filter-consistency readouts come from a dedicated run of this length at the current settings and

@@ -32,16 +32,22 @@ import numpy as np
 from lab_modules.claims import Claim
 from lab_modules.estimators.adaline import miso_run
 from lab_modules.estimators.fuzzy_basis_network import (
-    INITIAL_WIDTH,
     FuzzyBasisNetwork,
     LiveTraining,
     TrainedPair,
-    stiffness_networks,
     test_grid,
     training_grid,
 )
-from lab_modules.estimators.stiffness_identification import lsm_factors, lsm_tables
+from lab_modules.estimators.stiffness_identification import lsm_factors
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises._stiffness_networks import (
+    NETWORK_CONTROLS,
+    NOISE_SEED,
+    identified_tables,
+    lsm_kwargs,
+    network_key,
+    networks,
+)
 from lab_modules.loops.axial_bearing_loop import (
     SAMPLE_TIME_S,
     LoopSetup,
@@ -80,27 +86,7 @@ PARAMETERS = (
       description="Operating point whose planes and factors are shown (Table 2).", group="Operating point"),
     P("node_position_mm", "Node: rotor position x", "mm", "-0.5", choices=NODE_CHOICES_MM,
       description="Operating point whose planes and factors are shown (Table 3).", group="Operating point"),
-    P("fit", "Least-squares model", "", "no_intercept", choices=("no_intercept", "with_intercept"),
-      description="no_intercept: F = k_i i + k_s x, the paper's eq. 26; with_intercept: adds a constant "
-                  "(tends to the tangent plane).", group="Least squares"),
-    P("stencil_current_ma", "Stencil Δi", "mA", 10.0, 0.1, 750.0,
-      "Current offsets of the nine samples around each node (eq. 27: 0.01 A).", log=True, group="Least squares"),
-    P("stencil_position_um", "Stencil Δx", "µm", 10.0, 0.1, 250.0,
-      "Position offsets of the nine samples around each node (eq. 27: 0.01 mm).", log=True,
-      group="Least squares"),
-    P("force_noise_n", "Force-measurement noise σ_F", "N", 0.0, 0.0, 2.0,
-      "White noise on every measured force sample (LSM and ADALINE); the paper's data are noise-free.",
-      step=0.01, group="Least squares"),
-    P("fbfnn_epochs", "FBFNN training epochs", "", 1000, 0, 5000,
-      "Steepest-descent steps on the rule widths (Fig. 10).", step=50, integer=True, group="FBFNN"),
-    P("fbfnn_rate", "FBFNN learning rate", "", 0.1, 1e-3, 1.0,
-      "Step of the steepest descent on the relative mean-square error (lab choice).", log=True, group="FBFNN"),
-    P("fbfnn_initial_width", "Initial rule width σ₀", "", INITIAL_WIDTH, 0.1, 2.0,
-      "Width of every Gaussian rule before training, in normalised inputs (0.5 = node spacing).",
-      step=0.05, group="FBFNN"),
-    P("fbfnn_train_weights", "Train the weights too", "", "off", choices=("off", "on"),
-      description="off: the weights stay the LSM node values (the paper); on: steepest descent on them too.",
-      group="FBFNN"),
+    *NETWORK_CONTROLS,
     P("adaline_rate", "ADALINE learning rate η", "mm⁴/A⁴", 0.0175, 1e-4, 1.0,
       "Widrow-Hoff step (eq. 24); 0.0175: time constant 100 samples (10 ms) at the rotor's weight.",
       log=True, group="ADALINE"),
@@ -119,25 +105,13 @@ PARAMETERS = (
       description="force: F(i, x) with the nodes, the tangent and the LSM plane at the node; k_i, k_s: the "
                   "FBFNN surface while it trains, its error as colour and as a heat map on the floor.",
       group="3D view"),
-    P("seed", "Noise seed", "", 1, 0, 1_000_000, "Seed of the noise generators.", integer=True, group="Run"),
+    NOISE_SEED,
     P("time_scale", "Time scale", "×", 0.05, 0.001, 1.0,
       "Simulated seconds per wall-clock second in the live view.", log=True, group="Run"),
 )
 
 
 # -- least squares ----------------------------------------------------------------------------
-
-def lsm_kwargs(values: dict) -> dict:
-    return {"stencil_a": values["stencil_current_ma"] * 1e-3, "stencil_m": values["stencil_position_um"] * 1e-6,
-            "intercept": values["fit"] == "with_intercept"}
-
-
-def identified_tables(values: dict) -> tuple[np.ndarray, np.ndarray]:
-    """(k_i [N/A], k_s [N/mm]) on the 5×5 grid (rows x, columns i) with the chosen stencil and noise."""
-    rng = np.random.default_rng(int(values["seed"]))
-    ki, ks = lsm_tables(force_noise_n=values["force_noise_n"], rng=rng, **lsm_kwargs(values))
-    return ki, ks / N_PER_MM
-
 
 def table_matches(ki: np.ndarray, ks_mm: np.ndarray) -> tuple[int, int]:
     """Entries of Tables 4 and 5 the lab reproduces within ±0.01 (the one misprint within ±0.03)."""
@@ -153,28 +127,6 @@ def node(values: dict) -> tuple[float, float]:
 
 
 # -- FBFNN ---------------------------------------------------------------------------------------
-
-def _network_key(values: dict) -> tuple:
-    return (values["stencil_current_ma"], values["stencil_position_um"], values["fit"], values["force_noise_n"],
-            int(values["seed"]), int(values["fbfnn_epochs"]), values["fbfnn_rate"], values["fbfnn_initial_width"],
-            values["fbfnn_train_weights"])
-
-
-@lru_cache(maxsize=16)
-def _networks(key: tuple) -> TrainedPair:
-    stencil_ma, stencil_um, fit, noise, seed, epochs, rate, width, train_weights = key
-    values = {"stencil_current_ma": stencil_ma, "stencil_position_um": stencil_um, "fit": fit,
-              "force_noise_n": noise, "seed": seed}
-    ki, ks_mm = identified_tables(values)
-    train_i, train_x = training_grid()
-    ki_train, ks_train = lsm_factors(train_i, train_x, **lsm_kwargs(values))
-    return stiffness_networks(ki, ks_mm * N_PER_MM, ki_train, ks_train, epochs, rate, width, train_weights == "on")
-
-
-def networks(values: dict) -> TrainedPair:
-    """The trained pair for these settings (remembered: training takes about a second)."""
-    return _networks(_network_key(values))
-
 
 @lru_cache(maxsize=1)
 def _test_targets(stencil_a: float, stencil_m: float, intercept: bool):
@@ -339,7 +291,7 @@ class StiffnessMapSimulation:
         old, self.values = self.values, values
         self.loop.retuned(loop_setup(values, networks(values)))
         self.loop.setup = replace(self.loop.setup, adaline_initial=values["adaline_start"])
-        if _network_key(old) != _network_key(values):
+        if network_key(old) != network_key(values):
             self._restart_training(values)
         return self
 
@@ -654,7 +606,7 @@ class StiffnessMap(Exercise):
         }
 
     def scene(self, values: dict) -> StiffnessMapScene:
-        return StiffnessMapScene(values, training=live_training, training_key=_network_key, lsm=lsm_map,
+        return StiffnessMapScene(values, training=live_training, training_key=network_key, lsm=lsm_map,
                                  tables=identified_tables)
 
     def live_readouts(self, trace: dict[str, np.ndarray]) -> list[tuple[str, float, str]]:

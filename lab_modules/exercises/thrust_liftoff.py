@@ -37,7 +37,7 @@ from lab_modules import analysis
 from lab_modules.claims import Claim
 from lab_modules.estimators.thrust_kalman import PAPER_Q_N2, H
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
-from lab_modules.exercises.kalman_noise import pairs
+from lab_modules.exercises._common import pairs
 from lab_modules.loops.thrust_liftoff_loop import (
     ThrustSetup,
     ThrustSimulation,

@@ -1,0 +1,51 @@
+"""The step tests of ``lqg_vs_pid`` (paper 000, §IV, Figs. 8-9): both loops after the reference
+step and after the disturbance step set on the controls, as figures and as plots.  The runs
+and their figures come from ``loops.radial_axis_step_tests``."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lab_modules.exercises import Plot
+from lab_modules.exercises._lqg_vs_pid_design import COLORS, LOOPS
+from lab_modules.loops.radial_axis_experiment import AxisSetup
+from lab_modules.loops.radial_axis_step_tests import AFTER_STEP_S, BEFORE_STEP_S, column, step_tests
+from lab_modules.plants.radial_bearing import RIG
+
+T = RIG.sample_time_s
+PLOT_POINTS = 500
+
+
+def step_tests_at(values: dict, loops: dict[str, AxisSetup]) -> dict[str, dict]:
+    """Both step tests (Figs. 8-9) of both loops with the steps set on the controls."""
+    return step_tests(loops, values["reference_step_um"] * 1e-6, values["disturbance_step_n"])
+
+
+def sampled(trace: np.ndarray, name: str, rows: np.ndarray, scale: float) -> np.ndarray:
+    """Column ``name`` at the given rows, scaled; NaN (a gap) past the end of a stopped run."""
+    y = np.full(rows.size, np.nan)
+    kept = rows < len(trace)
+    y[kept] = column(trace, name)[rows[kept]] * scale
+    return y
+
+
+def step_plots(tests: dict, values: dict) -> list[Plot]:
+    """Figs. 8-9: position and control current of both loops after each step."""
+    reference_um, force_n = values["reference_step_um"], values["disturbance_step_n"]
+    n_rows = round((BEFORE_STEP_S + AFTER_STEP_S) / T)
+    rows = np.arange(0, n_rows, max(1, n_rows // PLOT_POINTS))
+    t_ms = (rows * T - BEFORE_STEP_S) * 1e3
+    plots = []
+    for test, title, reference_um_after in (
+            ("reference", f"Reference step {reference_um:g} µm (Fig. 8)", reference_um),
+            ("disturbance", f"Disturbance step {force_n:g} N (Fig. 9)", 0.0)):
+        traces = {name: tests[name][test] for name in LOOPS}
+        reference = np.where(t_ms >= 0.0, reference_um_after, 0.0)
+        plots.append(Plot(f"{title}: rotor position", "time after the step [ms]", "rotor position x [µm]",
+                          t_ms, (("reference", reference, COLORS["reference"]),) + tuple(
+                              (name, sampled(trace, "x_true_m", rows, 1e6), COLORS[name])
+                              for name, trace in traces.items())))
+        plots.append(Plot(f"{title}: control current", "time after the step [ms]", "coil current i [A]",
+                          t_ms, tuple((name, sampled(trace, "current_a", rows, 1.0), COLORS[name])
+                                      for name, trace in traces.items())))
+    return plots
