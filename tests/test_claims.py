@@ -14,10 +14,11 @@ import pytest
 
 from app.cli import main
 from lab_modules.claims import PENDING, WORKSHEET_MARKER, Claim, markdown_table, render_worksheet
-from lab_modules.exercises import claim_run, measure_claims, registry
+from lab_modules.exercises import claim_run, measure_claims
+from tests.example_exercise import contract_exercises
 
 ROOT = Path(__file__).resolve().parents[1]
-EXERCISES = registry()
+EXERCISES = contract_exercises()          # the registered ones and the tests' minimal example
 CLAIMS = [(name, index) for name, exercise in EXERCISES.items() for index in range(len(exercise.claims))]
 RUNS: dict = {}          # claim_run key -> metrics, shared by every test in this module
 

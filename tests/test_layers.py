@@ -161,7 +161,7 @@ EXERCISE_MODULES = {path.stem for path in EXERCISES.glob("*.py") if not path.ste
 
 def exercises_imported(path: pathlib.Path, source: str | None = None) -> set[str]:
     """The exercise modules other than its own that the module at ``path`` imports, at any depth
-    (an imported name ``lab_modules.exercises.X`` counts when X is an exercise module: the
+    (an imported name ``lab_modules.exercises.<name>`` counts when it is an exercise module: the
     package's own names such as ``Chart`` and the helpers do not)."""
     found = set()
     for name in project_imports(path, source):

@@ -12,11 +12,13 @@ import scipy.linalg
 
 from app.panels import pole_map
 from lab_modules import analysis
-from lab_modules.exercises import Analysis, get, registry, sensor_placement
+from lab_modules.exercises import Analysis, get, sensor_placement
 from lab_modules.exercises.ekf_parameters import linear_axis, linear_poles
 from lab_modules.plants.radial_bearing import RIG
+from tests.example_exercise import contract_exercises
 
-EXERCISES = tuple(registry())
+CONTRACT = contract_exercises()          # the registered exercises and the tests' minimal example
+EXERCISES = tuple(CONTRACT)
 #: the exercises with a common gain factor and the pole set it moves
 LOCI = {"kalman_noise": ("gain_factor", "closed loop"), "sensor_placement": ("gain_factor", "closed loop"),
         "ekf_disturbance": ("pid_gain", "closed loop (linearised)"),
@@ -34,7 +36,7 @@ def defaults() -> dict:
     """Each exercise's default values and pole sets (the quick analysis)."""
     out = {}
     for name in EXERCISES:
-        exercise = get(name)
+        exercise = CONTRACT[name]
         values = exercise.resolve()
         out[name] = (exercise, values, first_analysis(exercise, values).poles)
     return out
@@ -159,7 +161,7 @@ def test_mode_labels_do_not_overlap():
 
 @pytest.mark.parametrize("name", EXERCISES)
 def test_locus_only_where_there_is_a_common_gain_factor(name):
-    assert get(name).locus == LOCI.get(name)
+    assert CONTRACT[name].locus == LOCI.get(name)
 
 
 @pytest.mark.parametrize("name", sorted(LOCI))

@@ -21,9 +21,9 @@ Both run the algorithm of eq. 6::
 with F = df/dx evaluated at x_{k-1|k-1} (eq. 7).  R is diagonal (eq. 16), so
 the correction processes the two measurements one scalar at a time, which
 equals the matrix form above and needs no inverse.  Because g is linear
-(Gamma = G), the correction is the linear filter's (``estimators.update``,
+(Gamma = G), the correction is the linear filter's (``kalman.update``,
 here with 5 states), and the prediction's covariance step is its
-``estimators.propagate_covariance`` with Phi.  The paper specifies RK4
+``kalman.propagate_covariance`` with Phi.  The paper specifies RK4
 and eq. 15 for §III-B only; the lab uses the same discretisation for §III-A so
 that the two filters differ only in their model.
 
@@ -31,7 +31,8 @@ The compiled kernels (``predict`` here, ``update``) work in place so that the
 closed loop (``lab_modules.loops.radial_axis_ekf_loop``) can call them every 50 µs; the two
 classes wrap them for step-by-step use.  ``physics`` is the float64 vector
 (m, c_f, i0, delta0, cos(alpha), T_a, K_a, T_mx, T, K_mx, K_mi) of
-``physics_vector``, the layout of ``lab_modules.closed_loop``.
+``physics_vector``, the layout ``lab_modules.loops.radial_axis_ekf_loop`` passes for its
+plant and its filter.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Linear Kalman filter of paper 000, eq. 2, for the simulation loop.
 
-The filter works in place on small arrays so that the compiled closed loop
-(``lab_modules.closed_loop``) can call it 20 000 times per simulated second
+The filter works in place on small arrays so that the compiled closed loops
+(e.g. ``lab_modules.loops.radial_axis_loop``) can call it 20 000 times per simulated second
 without allocating.  ``KalmanFilter`` wraps the same two kernels for step-by-
 step use (tests, notebooks); there is one implementation.
 

@@ -121,7 +121,7 @@ class Exercise:
 
     name: str
     title: str
-    worksheet: str                   # file name in static/worksheets
+    worksheet: str                   # file name in static/worksheets (an absolute path is read as is)
     parameters: tuple[Parameter, ...]
     charts: tuple[Chart, ...]
     default_duration_s: float = 1.0

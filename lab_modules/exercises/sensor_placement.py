@@ -13,7 +13,7 @@ R_x = 7.1e-4 V², i.e. 1.33 µm); the Kalman filter of §II removes that noise.
 The loop is the paper's: amplifier eq. 4, PID K = 0.65, T_I = 50 ms,
 T_D = 3 ms (§IV), sampling T = 50 µs, optional steady-state Kalman filter
 (eq. 2) on the paper's rigid one-axis model; the plant is the beam model of
-``lab_modules.flexible_rotor``.  Sensor positions are measured along the
+``lab_modules.plants.flexible_rotor``.  Sensor positions are measured along the
 shaft from the bearing plane, positive towards the free (outboard) end.
 
 Values the paper leaves out (also in the worksheet):
