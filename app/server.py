@@ -117,7 +117,7 @@ def serve(settings: Settings) -> int:
     starting on ``settings.exercise`` (each tab can switch).  Returns the exit status."""
     try:
         access.check_bindable(settings.host, settings.port)
-        store = Store(settings.data_dir)
+        store = Store(settings.data_dir, log_failures=True)
     except (ParameterError, StoreError) as error:
         print(f"error: {error}", file=sys.stderr)
         return USAGE_ERROR

@@ -6,7 +6,7 @@ import threading
 import pytest
 
 from app.infra.access import OriginPolicy, check_host, check_port, is_loopback, new_token, token_matches
-from app.infra.store import CODE_ALPHABET, Store, StoreError, code_prefix, normalise_code
+from app.infra.store import CODE_ALPHABET, Store, StoreError, StoreUnavailable, code_prefix, normalise_code
 from lab_modules.parameters import ParameterError
 
 
@@ -109,3 +109,73 @@ def test_processes_opening_a_fresh_database_at_once(tmp_path, round_):
     errors = [p.communicate(timeout=60)[1] for p in processes]
     assert [p.returncode for p in processes] == [0] * 6, errors
     assert Store(tmp_path).count() == 6
+
+
+# -- a database that fails: full, damaged, another program's ------------------------------------
+class FullStore(Store):
+    """A store whose file cannot grow past its size when opened (``PRAGMA max_page_count``),
+    until ``make_room``: a full disk without filling one."""
+
+    def _open(self):
+        db = super()._open()
+        pages = db.execute("PRAGMA page_count").fetchone()[0]
+        db.execute(f"PRAGMA max_page_count={pages}")
+        return db
+
+    def make_room(self) -> None:
+        self._db.execute("PRAGMA max_page_count=1000000")
+
+
+def damaged_database(tmp_path):
+    """A lab database with experiments in it whose pages past the first (the schema) are overwritten."""
+    store = Store(tmp_path)
+    codes = [store.save("kalman_noise", {"seed": i}, "r.csv", bytes([i]) * 5000) for i in range(20)]
+    store.close()
+    with sqlite3.connect(tmp_path / "lab.sqlite3") as db:
+        db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+    path = tmp_path / "lab.sqlite3"
+    raw = bytearray(path.read_bytes())
+    for start in range(4096 * 3, len(raw), 4096):            # keep the header and the schema's pages
+        raw[start:start + 200] = b"\xa5" * 200
+    path.write_bytes(bytes(raw))
+    return codes
+
+
+def test_a_full_database_is_one_line_and_works_again_with_room(tmp_path, capsys):
+    store = FullStore(tmp_path, log_failures=True)
+    for attempt in range(3):                                  # logged once, however often it is tried
+        with pytest.raises(StoreUnavailable, match="^the disk holding the saved experiments is full$"):
+            store.save("kalman_noise", {"seed": attempt}, "big.csv", b"x" * 200_000)
+    assert capsys.readouterr().err.count("saved experiments: the disk holding") == 1
+    assert store.count() == 0 and store.check() == "ok"       # nothing half written; reading still works
+    store.make_room()
+    code = store.save("kalman_noise", {"seed": 1}, "big.csv", b"x" * 200_000)
+    assert store.load(code).recording == b"x" * 200_000
+    assert "works again" in capsys.readouterr().err
+
+
+def test_a_damaged_database_is_one_line(tmp_path):
+    codes = damaged_database(tmp_path)
+    store = Store(tmp_path)                                   # the schema is readable: it opens
+    failures = []
+    for code in codes:
+        try:
+            store.load(code)
+        except StoreUnavailable as error:
+            failures.append(str(error))
+    with pytest.raises(StoreUnavailable) as saving:
+        for i in range(20):
+            store.save("kalman_noise", {"seed": i}, "s.csv", bytes([100 + i]) * 5000)
+    assert failures and all(f.startswith("the saved-experiments database is damaged") for f in failures)
+    assert "damaged" in str(saving.value) and "\n" not in str(saving.value)
+
+
+def test_a_foreign_database_is_refused_when_opened(tmp_path):
+    with sqlite3.connect(tmp_path / "lab.sqlite3") as db:
+        db.execute("CREATE TABLE experiments (id INTEGER PRIMARY KEY, name TEXT)")
+    with pytest.raises(StoreUnavailable, match="is not the lab's: its table 'experiments' has another layout"):
+        Store(tmp_path)
+    (tmp_path / "other").mkdir()
+    (tmp_path / "other" / "lab.sqlite3").write_bytes(b"not a database at all " * 500)
+    with pytest.raises(StoreUnavailable, match="damaged"):
+        Store(tmp_path / "other")

@@ -1,9 +1,12 @@
 """A tab's saved experiments: the autosave (restored by a reload in the same browser), Save
-and Open by code, and the notes that tell the student their codes."""
+and Open by code, and the notes that tell the student their codes.
+
+When the database fails (a full disk, a damaged file), the tab goes on: the failure is one
+line in the tab saying that its settings are kept there, and the autosave is tried again
+after ``RETRY_AFTER_S`` (growing while it keeps failing); the server log has it once."""
 
 from __future__ import annotations
 
-import sys
 import time
 from collections.abc import Callable
 
@@ -11,7 +14,9 @@ from app.infra.store import Store, StoreError
 from app.panels.text import escaped
 from app.tab.worker import TabWorker
 
-AUTOSAVE_AFTER_S = 1.0            # a tab's autosave is written this long after its last change
+AUTOSAVE_AFTER_S = 1.0            # a tab's autosave is written this long after its last change,
+AUTOSAVE_AT_MOST_S = 5.0          # and at most this long after its first unsaved change (continuous moves)
+RETRY_AFTER_S = (2.0, 5.0, 10.0, 30.0, 60.0)   # a failed autosave is tried again after these, then every 60 s
 BROWSER_KEY = "autosave"          # the browser's localStorage keeps its newest autosave code under this key
 BROWSER_WAIT_S = 1.0              # a new tab waits at most this long for the browser's answer
 
@@ -19,12 +24,16 @@ BROWSER_WAIT_S = 1.0              # a new tab waits at most this long for the br
 class SavedExperiments:
     """Autosave, Save and Open for one tab (``store`` None: the lab runs without a store)."""
 
-    def __init__(self, store: Store | None, client, gui_lock, snapshot: Callable[[], tuple], worker: TabWorker):
-        """``snapshot()`` gives (exercise name, values, recording name, recording bytes)."""
+    def __init__(self, store: Store | None, client, gui_lock, snapshot: Callable[[], tuple], worker: TabWorker,
+                 warn: Callable[[str], None]):
+        """``snapshot()`` gives (exercise name, values, recording name, recording bytes); ``warn(markdown)``
+        shows a line in the tab's error line (a failed autosave)."""
         self.store, self.client, self.gui_lock = store, client, gui_lock
-        self.snapshot, self.worker = snapshot, worker
+        self.snapshot, self.worker, self.warn = snapshot, worker, warn
         self.autosave_code: str | None = None
         self.autosave_due: float | None = None    # perf_counter time of the next autosave
+        self.unsaved_since: float | None = None   # perf_counter time of the first change not yet autosaved
+        self.failures = 0                         # autosaves failed in a row
         self.restored_from: str | None = None     # the browser's autosave this tab started from
         self.autosave_note = None                 # the notes in the "Saved experiment" folder
         self.saved_note = None
@@ -60,9 +69,16 @@ class SavedExperiments:
             self.saved_note = gui.add_markdown("")
 
     def changed(self) -> None:
-        """Something worth keeping changed: autosave after ``AUTOSAVE_AFTER_S`` of quiet."""
-        if self.store is not None:
-            self.autosave_due = time.perf_counter() + AUTOSAVE_AFTER_S
+        """Something worth keeping changed: autosave after ``AUTOSAVE_AFTER_S`` of quiet, or
+        ``AUTOSAVE_AT_MOST_S`` after the first unsaved change while the changes go on.  After a
+        failure the retry keeps its time: moving a slider does not hammer a failing disk."""
+        if self.store is None:
+            return
+        now = time.perf_counter()
+        if self.unsaved_since is None:
+            self.unsaved_since = now
+        if not self.failures:
+            self.autosave_due = min(now + AUTOSAVE_AFTER_S, self.unsaved_since + AUTOSAVE_AT_MOST_S)
 
     def autosave(self) -> None:
         self.autosave_due = None
@@ -75,11 +91,25 @@ class SavedExperiments:
                 self.show_codes()
             else:
                 self.store.autosave(self.autosave_code, *self.snapshot())
-        except (StoreError, OSError, ValueError) as error:   # sqlite3.Error is not a ValueError: see store
-            print(f"autosave failed: {error}", file=sys.stderr, flush=True)
+        except StoreError as error:               # logged once by the store, not per tab and retry
+            self.failures += 1
+            retry_s = RETRY_AFTER_S[min(self.failures, len(RETRY_AFTER_S)) - 1]
+            self.autosave_due = time.perf_counter() + retry_s
+            self.warn(f"⚠️ Autosave failed: {escaped(error)}. Your settings are kept in this tab (do not "
+                      f"close it); the lab tries again in {retry_s:.0f} s.")
+            return
+        self.unsaved_since = None
+        if self.failures:
+            self.failures = 0
+            self.warn(f"Autosaved again as **{self.autosave_code}**.")
 
     def save(self) -> None:
-        code = self.store.save(*self.snapshot())
+        try:
+            code = self.store.save(*self.snapshot())
+        except StoreError as error:
+            self.saved_note.content = (f"⚠️ Not saved: {escaped(error)}. Your settings are kept in this tab: "
+                                       "press Save again later, or tell your instructor.")
+            return
         self.saved_note.content = (f"Saved as **{code}**: type it under *Experiment code* in any tab "
                                    "(also after a restart) and press *Open*.")
 
@@ -87,9 +117,13 @@ class SavedExperiments:
         """Open the experiment saved as ``text``: ``switch(exercise, parameters, recording)``."""
         try:
             saved = self.store.load(text)
-            exercise = exercises[saved.exercise]
-        except (StoreError, KeyError) as error:
-            self.saved_note.content = f"⚠️ {escaped(error)}"
+        except StoreError as error:
+            self.saved_note.content = f"⚠️ Not opened: {escaped(error)}"
+            return
+        exercise = exercises.get(saved.exercise)
+        if exercise is None:
+            self.saved_note.content = (f"⚠️ Not opened: {saved.code} is an experiment of "
+                                       f"{escaped(saved.exercise)}, which this lab does not have.")
             return
         recording = (saved.recording_name, saved.recording) if saved.recording is not None else None
         switch(exercise, saved.parameters, recording)

@@ -71,7 +71,8 @@ class LabSession:
         self.generation = next(self.generations)
         self.worker = TabWorker(f"tab-{client.client_id}")
         self.state = LabState()
-        self.saved = SavedExperiments(store, client, self.gui_lock, self.state.snapshot, self.worker)
+        self.saved = SavedExperiments(store, client, self.gui_lock, self.state.snapshot, self.worker,
+                                      self._show_error)
         self.controls = Controls(self.worker, self.state, self.gui_lock, self._apply)
         self.worker.before_event = self.controls.flush_typing
         self.analysis = AnalysisView(client, self.gui_lock, self.state, self.worker, self._current)
@@ -113,14 +114,14 @@ class LabSession:
                 for action in events:
                     self._do(action)
                 if self.worker.is_due(self.saved.autosave_due):
-                    self._autosave()
+                    self._do(self._autosave)
                 self.worker.pace(time.thread_time() - spent)
         except TabClosed:
             pass
         finally:
             self.close()
             if self.saved.autosave_due is not None:
-                self._autosave()                  # the last changes of a closed tab
+                self._do(self._autosave)          # the last changes of a closed tab
 
     def _do(self, action: Callable[[], None]) -> None:
         """Run one event; an error is shown in the tab (one line), never ends the worker."""
@@ -130,7 +131,7 @@ class LabSession:
             raise
         except Exception as error:  # noqa: BLE001 - any failure of one event is shown, the tab goes on
             traceback.print_exc()
-            self._show_error(f"⚠️ That did not work: {escaped(error)}")
+            self._show_error(f"⚠️ That did not work: {escaped(error) or type(error).__name__}")
 
     def _enter(self, exercise: Exercise) -> None:
         """The class token was right: the lab replaces the gate."""

@@ -1,0 +1,151 @@
+"""What the disk, a crowd or a curious student does to the classroom server (issue 24): raw
+websocket clients on loopback, bounded in time and count.  Figures are printed (``pytest -s``)."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import resource
+import sqlite3
+import subprocess
+import sys
+import time
+
+import pytest
+
+from tests.test_store_access import damaged_database
+from tests.wsclient import REPO, RawTab, lab_process, run_async
+
+pytestmark = pytest.mark.classroom
+
+NOISE = "Position sensor noise σ [µm]"
+SCOPE = "Rotor position [µm]"
+READOUTS = "| quantity | value | unit |"
+ENV = {**os.environ, "PYTHONPATH": str(REPO)}
+
+
+def url(port: int) -> str:
+    return f"http://127.0.0.1:{port}"
+
+
+async def _lab_tab(port: int, timeout: float = 120.0) -> RawTab:
+    tab = await RawTab().connect(url(port))
+    assert await tab.wait_for(lambda: tab.find_containing("GuiMarkdownMessage", READOUTS), timeout)
+    return tab
+
+
+def _markdown(tab: RawTab, text: str) -> str:
+    uuid = tab.find_containing("GuiMarkdownMessage", text)
+    return tab.elements[uuid]["content"] if uuid else ""
+
+
+async def _streams(tab: RawTab, seconds: float = 3.0) -> int:
+    """Scope updates the tab received in the next ``seconds``."""
+    scope = tab.find("GuiUplotMessage", SCOPE)
+    start = time.perf_counter()
+    await asyncio.sleep(seconds)
+    return len(tab.update_times(scope, "data", start))
+
+
+def _file_size_limit(pid: int, limit: int) -> None:
+    """No file of process ``pid`` may grow beyond ``limit`` bytes (as on a full disk; Python
+    ignores the SIGXFSZ that comes with it, so the write fails instead)."""
+    resource.prlimit(pid, resource.RLIMIT_FSIZE, (limit, resource.RLIM_INFINITY))   # soft: can be raised again
+
+
+def test_a_full_disk_leaves_tabs_running_and_saves_again_with_room(tmp_path):
+    """The database's files cannot grow after the first autosave: the tab keeps streaming and
+    answering its slider, says in one line that its settings are kept, the log has the failure
+    once and no traceback, a new tab still opens; with room again the retry saves."""
+    port = 8181
+    log = tmp_path / "server.log"
+    data = tmp_path / "data"
+    with lab_process(port, data_dir=data, log=log) as server:
+        async def scenario():
+            tab = await _lab_tab(port)
+            assert await tab.wait_for(lambda: _markdown(tab, "This tab is autosaved as"), 30)
+            _file_size_limit(server.pid, max(path.stat().st_size for path in data.iterdir()))
+            slider = tab.find("GuiSliderMessage", NOISE)
+            await tab.set_value(slider, 1.3)
+            await tab.wait_for(lambda: _markdown(tab, "Autosave failed"), 30)
+            failed = _markdown(tab, "Autosave failed")
+            updates_while_failing = await _streams(tab)
+            readouts = _markdown(tab, READOUTS)
+            await tab.set_value(slider, 1.6)
+            answered = await tab.wait_for(lambda: _markdown(tab, READOUTS) != readouts, 30)
+            second = await _lab_tab(port)
+            second_streams = await _streams(second)
+            _file_size_limit(server.pid, resource.RLIM_INFINITY)
+            again = await tab.wait_for(lambda: _markdown(tab, "Autosaved again"), 60)
+            await second.close()
+            await tab.close()
+            return failed, updates_while_failing, answered, second_streams, again
+        failed, updates, answered, second_streams, again = run_async(scenario())
+    text = log.read_text()
+    print(f"\nfull disk: tab line {failed!r}; scope {updates / 3:.1f} updates/s while failing; "
+          f"a new tab {second_streams / 3:.1f} updates/s; saved again: {bool(again)}")
+    assert "kept in this tab" in failed and updates > 0 and answered and second_streams > 0 and again
+    assert text.count("saved experiments: the saved experiments cannot be written") == 1, text[-2000:]
+    assert "works again" in text and "Traceback" not in text, text[-3000:]
+
+
+def test_a_damaged_database_leaves_tabs_running(tmp_path):
+    port = 8182
+    log = tmp_path / "server.log"
+    damaged_database(tmp_path / "data")
+    with lab_process(port, data_dir=tmp_path / "data", log=log):
+        async def scenario():
+            tab = await _lab_tab(port)
+            failed = await tab.wait_for(lambda: _markdown(tab, "Autosave failed"), 30)
+            updates = await _streams(tab)
+            await tab.close()
+            return failed, updates
+        failed, updates = run_async(scenario())
+    text = log.read_text()
+    assert failed and updates > 0 and "Traceback" not in text, text[-3000:]
+    assert text.count("database is damaged") == 1
+
+
+def test_commands_on_a_bad_database_exit_2_with_one_line(tmp_path):
+    from app.infra.store import Store, StoreUnavailable
+    damaged, foreign = tmp_path / "damaged", tmp_path / "foreign"
+    codes = damaged_database(damaged)
+    store = Store(damaged)
+    unreadable = []
+    for code in codes:
+        try:
+            store.load(code)
+        except StoreUnavailable:
+            unreadable.append(code)
+    store.close()
+    foreign.mkdir()
+    with sqlite3.connect(foreign / "lab.sqlite3") as db:
+        db.execute("CREATE TABLE experiments (id INTEGER PRIMARY KEY, name TEXT)")
+    runs = {
+        "run --code, damaged": [sys.executable, "-m", "app", "run", "--code", unreadable[0], "--data-dir",
+                                str(damaged)],
+        "save, damaged": [sys.executable, "-m", "app", "save", "kalman_noise", "--data-dir", str(damaged)],
+        "run --code, foreign": [sys.executable, "-m", "app", "run", "--code", "KN-ABCD", "--data-dir", str(foreign)],
+        "save, foreign": [sys.executable, "-m", "app", "save", "kalman_noise", "--data-dir", str(foreign)],
+        "serve, foreign": [sys.executable, "-m", "app", "--port", "8183", "--data-dir", str(foreign)],
+    }
+    for what, command in runs.items():
+        done = subprocess.run(command, check=False, cwd=REPO, capture_output=True, text=True, env=ENV, timeout=300)
+        lines = done.stderr.strip().splitlines()
+        assert done.returncode == 2 and len(lines) == 1 and lines[0].startswith("error: "), (what, done.stderr)
+        assert ("damaged" if "damaged" in what else "another layout") in lines[0], (what, lines[0])
+
+
+def test_save_on_a_full_disk_exits_2_with_one_line(tmp_path):
+    from app.infra.store import Store
+    Store(tmp_path).close()
+    limit = max(path.stat().st_size for path in tmp_path.iterdir())
+    recording = tmp_path / "run.csv"
+    recording.write_bytes((REPO / "static" / "recordings" / "maglev_leadlag.csv").read_bytes())
+    done = subprocess.run([sys.executable, "-m", "app", "save", "maglev_tuning", "--data", str(recording),
+                           "--data-dir", str(tmp_path)], check=False, cwd=REPO, capture_output=True, text=True,
+                          env=ENV, timeout=300,
+                          preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit)))
+    assert done.returncode == 2 and done.stderr.startswith("error: ") and "cannot be written" in done.stderr, \
+        done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1
