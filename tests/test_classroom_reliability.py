@@ -149,3 +149,39 @@ def test_save_on_a_full_disk_exits_2_with_one_line(tmp_path):
     assert done.returncode == 2 and done.stderr.startswith("error: ") and "cannot be written" in done.stderr, \
         done.stderr
     assert len(done.stderr.strip().splitlines()) == 1
+
+
+async def _unfinished_uploads(port: int, count: int, part: bytes) -> RawTab:
+    """A maglev_tuning tab that starts ``count`` uploads of 30 parts and sends 20 parts of each."""
+    tab = await _lab_tab(port)
+    upload = tab.find("GuiUploadButtonMessage", "Load recording (CSV)")
+    for k in range(count):
+        await tab.send({"type": "FileTransferStartUpload", "source_component_uuid": upload, "transfer_uuid": f"t{k}",
+                        "filename": "a.csv", "mime_type": "text/csv", "part_count": 30,
+                        "size_bytes": 30 * len(part)})
+        for i in range(20):
+            await tab.send({"type": "FileTransferPart", "source_component_uuid": upload, "transfer_uuid": f"t{k}",
+                            "part_index": i, "content": part})
+    return tab
+
+
+def test_unfinished_uploads_are_bounded_per_tab(tmp_path):
+    """Two tabs each start 20 uploads of 15.7 MB and leave each at 10.5 MB: only each tab's newest
+    is kept (before: 20 per tab, the process grew by 420 MB)."""
+    from tests.wsclient import process_rss_mb
+    port = 8184
+    with lab_process(port, "--exercise", "maglev_tuning", data_dir=tmp_path, log=tmp_path / "server.log") as server:
+        async def scenario():
+            warm = await _lab_tab(port)
+            await asyncio.sleep(2)
+            start = process_rss_mb(server.pid)
+            part = b"1" * 512 * 1024
+            tabs = [await _unfinished_uploads(port, 20, part) for _ in range(2)]
+            await asyncio.sleep(5)
+            grown = process_rss_mb(server.pid) - start
+            for tab in (*tabs, warm):
+                await tab.close()
+            return grown
+        grown = run_async(scenario())
+    print(f"\nuploads: 2 tabs x 20 unfinished uploads of 10.5 MB: the server grew by {grown:.0f} MB")
+    assert grown < 80

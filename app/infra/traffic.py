@@ -9,8 +9,11 @@ and hands every one to its handlers (GUI updates become thread-pool jobs).
   none in the last ``COALESCE_S``; otherwise only the newest value is kept and
   passed on when that interval is over.  A burst of 10,000 slider updates
   costs their decoding and one dispatch per control per interval;
-- **checks uploads**: a declared size above ``MAX_UPLOAD_BYTES`` is refused
-  before any part is accepted, and parts beyond the declared size are dropped;
+- **checks uploads** (``Uploads``): a declared size above ``MAX_UPLOAD_BYTES`` is refused
+  before any part is accepted, and parts beyond the declared size are dropped; a tab has at
+  most one unfinished upload (a new one drops the older), the unfinished uploads of the whole
+  process may declare at most ``UPLOAD_BUDGET_BYTES``, and one that sends no part for
+  ``UPLOAD_STALE_S`` is dropped (its parts are freed);
 - **answers invalid messages** (undecodable, or rejected by a handler) in the
   tab through ``Traffic.report`` and logs one line per client, not per message.
 
@@ -26,6 +29,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import msgspec
 import viser
@@ -36,6 +40,11 @@ from viser import _messages
 COALESCE_S = 0.02
 #: Largest upload accepted (the recordings' limit).
 MAX_UPLOAD_BYTES = 20_000_000
+#: What the unfinished uploads of one process may declare together (five of the largest at once).
+UPLOAD_BUDGET_BYTES = 100_000_000
+#: An unfinished upload that sends no part for this long is dropped [s] (a browser sends every
+#: part at once: 20 MB take 16 s on a 10 Mbit/s link).
+UPLOAD_STALE_S = 30.0
 #: Share of the event loop one connection's messages may take, and the burst it may take at once [s].
 LOOP_SHARE = 0.05
 LOOP_BURST_S = 0.02
@@ -48,6 +57,66 @@ YIELD_EVERY = 32
 REPORTS_PER_CLIENT = 5
 
 
+@dataclass
+class Transfer:
+    """One unfinished upload: bytes declared and received, and when its last part came [s]."""
+
+    declared: int
+    received: int = 0
+    last_part: float = 0.0
+
+
+class Uploads:
+    """The unfinished uploads of one process, by (client id, transfer uuid): at most one per tab,
+    at most ``budget`` bytes declared in all, none idle longer than ``stale_s``."""
+
+    def __init__(self, budget: int = UPLOAD_BUDGET_BYTES, stale_s: float = UPLOAD_STALE_S):
+        self.budget, self.stale_s = budget, stale_s
+        self.transfers: dict[tuple, Transfer] = {}
+
+    def reserved(self) -> int:
+        return sum(t.declared for t in self.transfers.values())
+
+    def start(self, client_id, transfer: str, declared: int, now: float) -> tuple[bool, list[tuple]]:
+        """A tab starts an upload: whether it is accepted, and the (client, transfer) pairs dropped
+        for it (the tab's older unfinished upload, stale ones), whose parts must be freed."""
+        dropped = [key for key in self.transfers if key[0] == client_id] + self.stale(now)
+        for key in dropped:
+            self.transfers.pop(key, None)
+        accepted = self.reserved() + declared <= self.budget
+        if accepted:
+            self.transfers[(client_id, transfer)] = Transfer(declared, 0, now)
+        return accepted, dropped
+
+    def part(self, client_id, transfer: str, size: int, now: float) -> str | None:
+        """A part arrived: "more" (pass it on), "done" (pass it on, the upload is complete),
+        "overflow" (beyond the declared size: the upload is dropped) or None (not a transfer
+        in progress: ignore it)."""
+        key = (client_id, transfer)
+        current = self.transfers.get(key)
+        if current is None:
+            return None
+        if current.received + size > current.declared:
+            del self.transfers[key]
+            return "overflow"
+        current.received += size
+        current.last_part = now
+        if current.received == current.declared:
+            del self.transfers[key]
+            return "done"
+        return "more"
+
+    def stale(self, now: float) -> list[tuple]:
+        return [key for key, t in self.transfers.items() if now - t.last_part > self.stale_s]
+
+    def drop(self, keys) -> None:
+        for key in keys:
+            self.transfers.pop(key, None)
+
+    def of_client(self, client_id) -> list[tuple]:
+        return [key for key in self.transfers if key[0] == client_id]
+
+
 class Traffic:
     """The per-client policy installed into one viser server."""
 
@@ -57,7 +126,10 @@ class Traffic:
         self.logged: set[int] = set()
         self.reported: dict[int, int] = {}
         self.lock = threading.Lock()
-        self.stats = {"received": 0, "dispatched_updates": 0, "coalesced": 0, "invalid": 0, "refused_uploads": 0}
+        self.uploads = Uploads()           # touched on the event loop only
+        self.sweep_scheduled = False
+        self.stats = {"received": 0, "dispatched_updates": 0, "coalesced": 0, "invalid": 0, "refused_uploads": 0,
+                      "dropped_uploads": 0}
 
     # -- lookups ------------------------------------------------------------------
     def _connections(self) -> dict:
@@ -91,6 +163,25 @@ class Traffic:
         else:
             asyncio.run_coroutine_threadsafe(coroutine, loop)
 
+    # -- uploads ----------------------------------------------------------------------
+    def free_uploads(self, keys) -> None:
+        """Forget unfinished uploads and free the parts viser holds of them (on the event loop)."""
+        self.uploads.drop(keys)
+        for client_id, transfer in keys:
+            self.stats["dropped_uploads"] += 1
+            client = self.server._connected_clients.get(client_id)
+            for gui in (self.server.gui, getattr(client, "gui", None)):
+                if gui is not None:
+                    gui._current_file_upload_states.pop(transfer, None)
+
+    def sweep_uploads(self) -> None:
+        """Drop stale uploads, and look again while any upload is unfinished (on the event loop)."""
+        loop = asyncio.get_running_loop()
+        self.free_uploads(self.uploads.stale(loop.time()))
+        self.sweep_scheduled = bool(self.uploads.transfers)
+        if self.sweep_scheduled:
+            loop.call_later(self.uploads.stale_s / 2, self.sweep_uploads)
+
     # -- invalid input ----------------------------------------------------------------
     def invalid(self, client_id: int | None, what: str) -> None:
         """One bad message: a line in the server log (once per client) and in the tab (a few times)."""
@@ -107,9 +198,11 @@ class Traffic:
             self.report_to_tab(client_id, f"The lab ignored a message it could not use ({what}).")
 
     def forget(self, client_id: int) -> None:
+        """A tab is gone (on the event loop): so are its unfinished uploads."""
         with self.lock:
             self.logged.discard(client_id)
             self.reported.pop(client_id, None)
+        self.free_uploads(self.uploads.of_client(client_id))
 
 
 _installed: Traffic | None = None
@@ -162,7 +255,6 @@ async def _consumer(websocket, handle_message: Callable, message_class) -> None:
     client_id: int | None = None
     pending: dict[str, bytes] = {}                # control uuid (or "camera") -> newest raw update
     last_sent: dict[str, float] = {}              # control uuid -> loop time of its last dispatch
-    uploads: dict[str, list[int]] = {}            # transfer uuid -> [declared bytes, accepted bytes]
     scheduled: set[str] = set()
     allowance, refilled, count = LOOP_BURST_S, time.perf_counter(), 0
 
@@ -220,7 +312,7 @@ async def _consumer(websocket, handle_message: Callable, message_class) -> None:
         if isinstance(message, _messages.FileTransferStartUpload):
             declared = message.size_bytes
             if not isinstance(declared, int) or not isinstance(message.part_count, int) or declared < 0 \
-                    or message.part_count < 0:
+                    or message.part_count < 0 or not isinstance(message.transfer_uuid, str):
                 traffic.invalid(client_id, "malformed upload")
                 return
             if declared > MAX_UPLOAD_BYTES:
@@ -229,18 +321,29 @@ async def _consumer(websocket, handle_message: Callable, message_class) -> None:
                     traffic.report_to_tab(client_id, f"The file is {_describe_bytes(declared)}; the largest "
                                                      f"accepted is {_describe_bytes(MAX_UPLOAD_BYTES)}.")
                 return
-            uploads[message.transfer_uuid] = [declared, 0]
-        elif isinstance(message, _messages.FileTransferPart):
-            budget = uploads.get(message.transfer_uuid)
-            content = message.content
-            if budget is None or not isinstance(content, bytes) or budget[1] + len(content) > budget[0]:
-                if budget is not None:
-                    uploads.pop(message.transfer_uuid, None)
-                    traffic.invalid(client_id, "upload parts beyond the declared size")
+            accepted, dropped = traffic.uploads.start(client_id, message.transfer_uuid, declared, loop.time())
+            traffic.free_uploads(dropped)
+            if not accepted:
+                traffic.stats["refused_uploads"] += 1
+                if client_id is not None:
+                    traffic.report_to_tab(client_id, "The lab is receiving other files just now: "
+                                                     "load yours again in a minute.")
                 return
-            budget[1] += len(content)
-            if budget[1] == budget[0]:
-                uploads.pop(message.transfer_uuid, None)
+            if not traffic.sweep_scheduled:
+                traffic.sweep_scheduled = True
+                loop.call_later(traffic.uploads.stale_s / 2, traffic.sweep_uploads)
+        elif isinstance(message, _messages.FileTransferPart):
+            content = message.content
+            if not isinstance(content, bytes) or not isinstance(message.transfer_uuid, str):
+                traffic.invalid(client_id, "malformed upload part")
+                return
+            progress = traffic.uploads.part(client_id, message.transfer_uuid, len(content), loop.time())
+            if progress is None:
+                return
+            if progress == "overflow":
+                traffic.free_uploads([(client_id, message.transfer_uuid)])
+                traffic.invalid(client_id, "upload parts beyond the declared size")
+                return
         handle_message(message)
 
     while True:
