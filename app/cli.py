@@ -1,7 +1,7 @@
 """Command line of the lab.
 
     python -m app [--host H] [--port P] [--exercise NAME] [--data-dir DIR] [--token T]
-                  [--allow-origin URL ...]     start the browser lab (default; also ``serve``)
+                  [--max-tabs N] [--allow-origin URL ...]   start the browser lab (default; also ``serve``)
     python -m app serve --workers N [same options] [--worker-ports FIRST]   N lab processes behind HAProxy
     python -m app haproxy-config --backend HOST:PORT ...    HAProxy configuration for several machines
     python -m app list [--json]                exercises and their parameters
@@ -47,6 +47,9 @@ def _serve_options(parser: argparse.ArgumentParser, defaults: bool) -> None:
                         help="where saved experiments live (default ~/.local/share/amb-lab)")
     parser.add_argument("--token", default=default(None),
                         help="class token asked of every new tab when not on loopback (default: generated)")
+    parser.add_argument("--max-tabs", default=default(str(access.TABS_PER_PROCESS)), metavar="N",
+                        help=f"tabs one lab process gives a lab (default {access.TABS_PER_PROCESS}, what one core "
+                             "streams at full rate); further tabs wait at a 'the lab is full' note")
     parser.add_argument("--allow-origin", action="append", default=default([]), metavar="URL",
                         help="a web origin besides the lab's own address that may open tabs (repeatable), "
                              "e.g. https://lab.example.org behind a proxy")

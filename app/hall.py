@@ -47,12 +47,21 @@ POLL_S = 0.5
 RESTART_DELAYS_S = (1.0, 2.0, 5.0, 10.0, 30.0)   # after quick successive crashes
 STABLE_AFTER_S = 30.0                 # a worker that ran this long restarts without delay
 STOP_TIMEOUT_S = 10.0
+PAGE_LOADS = 4                        # connections a process takes beyond its tabs: page loads, a "full" note
+QUEUE_TIMEOUT_S = 5
+#: What HAProxy answers when every process is at its cap (or none is up): one line, no quotes.
+FULL_PAGE = ("<!doctype html><title>AMB estimation lab</title><h2>The lab is full</h2><p>Every place on the "
+             "lab server is taken (or it is restarting). Try again in a minute, or ask your instructor.</p>")
 
 
 def haproxy_config(bind_host: str, bind_port: int, backends: list[tuple[str, int]],
-                   health_path: str = HEALTH_PATH, health_status: int = HEALTH_STATUS, note: str = "") -> str:
-    """An HAProxy configuration balancing lab tabs over ``backends`` (host, port)."""
-    servers = "\n".join(f"    server lab{k + 1} {host}:{port}" for k, (host, port) in enumerate(backends))
+                   health_path: str = HEALTH_PATH, health_status: int = HEALTH_STATUS, note: str = "",
+                   max_tabs: int | None = None) -> str:
+    """An HAProxy configuration balancing lab tabs over ``backends`` (host, port); ``max_tabs``:
+    each backend's ``--max-tabs``, capping its connections (tabs plus a few page loads) so that
+    a full class spreads and the last students get the "lab is full" page."""
+    cap = f" maxconn {max_tabs + PAGE_LOADS}" if max_tabs is not None else ""
+    servers = "\n".join(f"    server lab{k + 1} {host}:{port}{cap}" for k, (host, port) in enumerate(backends))
     bind = f"[{bind_host}]" if ":" in bind_host else bind_host
     return f"""# AMB estimation lab: HAProxy in front of {len(backends)} lab process(es).{note}
 global
@@ -68,6 +77,8 @@ defaults
     timeout http-request 10s
     timeout tunnel 4h                    # a tab is one websocket for the whole lesson
     timeout client-fin 5s
+    timeout queue {QUEUE_TIMEOUT_S}s                      # every process at its maxconn: the page below, not a long wait
+    http-error status 503 content-type "text/html; charset=utf-8" string "{FULL_PAGE}"
 
 frontend lab
     bind {bind}:{bind_port}
@@ -157,7 +168,7 @@ def worker_command(port: int, settings, allow_origins: list[str]) -> list[str]:
     token is passed on explicitly: a worker on loopback would otherwise ask none, and every tab
     reaches it through HAProxy from the network."""
     command = [sys.executable, "-m", "app", "--host", "127.0.0.1", "--port", str(port),
-               "--exercise", settings.exercise]
+               "--exercise", settings.exercise, "--max-tabs", str(settings.max_tabs)]
     if settings.token is not None:
         command += ["--token", settings.token]
     if settings.data_dir is not None:                 # one saved-experiments database for all workers
@@ -231,7 +242,7 @@ def serve_hall(settings, workers: int, first_worker_port: int | None, allow_orig
     proxy: subprocess.Popen | None = None
     with tempfile.TemporaryDirectory(prefix="amb-lab-hall-") as scratch:
         config = Path(scratch) / "haproxy.cfg"
-        config.write_text(haproxy_config(host, port, [("127.0.0.1", p) for p in ports]))
+        config.write_text(haproxy_config(host, port, [("127.0.0.1", p) for p in ports], max_tabs=settings.max_tabs))
         try:
             for worker in pool:
                 worker.start()

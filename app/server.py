@@ -30,6 +30,7 @@ from lab_modules.scenes.bearing import CAMERA_POSITION
 
 USAGE_ERROR = 2
 SWITCH_INTERVAL_S = 0.001
+RETURN_MEMORY_EVERY_S = 2.0       # a closed tab's memory goes back to the system within about this
 
 
 @dataclass
@@ -43,6 +44,7 @@ class Settings:
     token: str | None = None               # None: no token asked (loopback only)
     token_generated: bool = False
     origins: access.OriginPolicy = field(default_factory=access.OriginPolicy)
+    max_tabs: int = access.TABS_PER_PROCESS
 
     @classmethod
     def from_args(cls, args) -> Settings:
@@ -56,7 +58,8 @@ class Settings:
             token, generated = access.new_token(), True
         return cls(host=host, port=port, exercise=args.exercise,
                    data_dir=Path(args.data_dir) if args.data_dir else None, token=token,
-                   token_generated=generated, origins=access.OriginPolicy(args.allow_origin or ()))
+                   token_generated=generated, origins=access.OriginPolicy(args.allow_origin or ()),
+                   max_tabs=access.check_max_tabs(args.max_tabs))
 
 
 
@@ -141,6 +144,8 @@ def serve(settings: Settings) -> int:
     server.initial_camera.look_at = (0.0, 0.0, 0.0)
     sessions: dict[int, LabSession] = {}
     lock = threading.Lock()
+    closed_tabs = threading.Event()          # a tab closed since the freed memory was last returned
+    admission = access.Admission(settings.max_tabs)
 
     def report(client_id: int, text: str) -> None:
         with lock:
@@ -162,7 +167,7 @@ def serve(settings: Settings) -> int:
             policy.close(client.client_id, "origin not allowed")
             return
         session = LabSession(client, chosen, store, settings.token,
-                             on_refused=lambda reason: policy.close(client.client_id, reason))
+                             on_refused=lambda reason: policy.close(client.client_id, reason), admission=admission)
         with lock:
             sessions[client.client_id] = session
 
@@ -173,17 +178,20 @@ def serve(settings: Settings) -> int:
         policy.forget(client.client_id)
         if session is not None:
             session.close()
-        _return_freed_memory()
+        closed_tabs.set()
 
     url = shown_url(settings.host, server.get_port())
     print(f"AMB estimation lab: open {url} in a browser (Ctrl+C to stop)", flush=True)
     if settings.token is not None:
         how = "generated; set your own with --token" if settings.token_generated else "from --token"
         print(f"Class token: {settings.token} ({how}); every new tab asks for it", flush=True)
-    print(f"Saved experiments: {store.path}", flush=True)
+    print(f"Saved experiments: {store.path}; at most {settings.max_tabs} tabs (--max-tabs)", flush=True)
     try:
         while True:
-            time.sleep(1.0)
+            time.sleep(RETURN_MEMORY_EVERY_S)
+            if closed_tabs.is_set():          # after the closed tabs' threads ended and freed their memory
+                closed_tabs.clear()
+                _return_freed_memory()
     except KeyboardInterrupt:
         server.stop()
     return 0

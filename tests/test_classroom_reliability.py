@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import os
 import resource
+import shutil
 import sqlite3
 import subprocess
 import sys
@@ -57,7 +58,7 @@ def test_a_full_disk_leaves_tabs_running_and_saves_again_with_room(tmp_path):
     """The database's files cannot grow after the first autosave: the tab keeps streaming and
     answering its slider, says in one line that its settings are kept, the log has the failure
     once and no traceback, a new tab still opens; with room again the retry saves."""
-    port = 8181
+    port = 8461
     log = tmp_path / "server.log"
     data = tmp_path / "data"
     with lab_process(port, data_dir=data, log=log) as server:
@@ -90,7 +91,7 @@ def test_a_full_disk_leaves_tabs_running_and_saves_again_with_room(tmp_path):
 
 
 def test_a_damaged_database_leaves_tabs_running(tmp_path):
-    port = 8182
+    port = 8462
     log = tmp_path / "server.log"
     damaged_database(tmp_path / "data")
     with lab_process(port, data_dir=tmp_path / "data", log=log):
@@ -127,7 +128,7 @@ def test_commands_on_a_bad_database_exit_2_with_one_line(tmp_path):
         "save, damaged": [sys.executable, "-m", "app", "save", "kalman_noise", "--data-dir", str(damaged)],
         "run --code, foreign": [sys.executable, "-m", "app", "run", "--code", "KN-ABCD", "--data-dir", str(foreign)],
         "save, foreign": [sys.executable, "-m", "app", "save", "kalman_noise", "--data-dir", str(foreign)],
-        "serve, foreign": [sys.executable, "-m", "app", "--port", "8183", "--data-dir", str(foreign)],
+        "serve, foreign": [sys.executable, "-m", "app", "--port", "8463", "--data-dir", str(foreign)],
     }
     for what, command in runs.items():
         done = subprocess.run(command, check=False, cwd=REPO, capture_output=True, text=True, env=ENV, timeout=300)
@@ -169,7 +170,7 @@ def test_unfinished_uploads_are_bounded_per_tab(tmp_path):
     """Two tabs each start 20 uploads of 15.7 MB and leave each at 10.5 MB: only each tab's newest
     is kept (before: 20 per tab, the process grew by 420 MB)."""
     from tests.wsclient import process_rss_mb
-    port = 8184
+    port = 8464
     with lab_process(port, "--exercise", "maglev_tuning", data_dir=tmp_path, log=tmp_path / "server.log") as server:
         async def scenario():
             warm = await _lab_tab(port)
@@ -185,3 +186,92 @@ def test_unfinished_uploads_are_bounded_per_tab(tmp_path):
         grown = run_async(scenario())
     print(f"\nuploads: 2 tabs x 20 unfinished uploads of 10.5 MB: the server grew by {grown:.0f} MB")
     assert grown < 80
+
+
+def test_tabs_beyond_max_tabs_wait_at_a_full_note_and_enter_when_a_place_frees(tmp_path):
+    """``--max-tabs 2``: a third tab shows "The lab is full" and no lab; once a tab closes it
+    gets its lab by itself; the log says the lab is full once."""
+    port = 8465
+    log = tmp_path / "server.log"
+    with lab_process(port, "--max-tabs", "2", data_dir=tmp_path, log=log):
+        async def scenario():
+            first, second = await _lab_tab(port), await _lab_tab(port)
+            third = await RawTab().connect(url(port))
+            full = await third.wait_for(lambda: _markdown(third, "The lab is full"), 60)
+            await asyncio.sleep(3)
+            lab_while_full = bool(third.find("GuiUplotMessage", SCOPE) or third.find("GuiSliderMessage", NOISE))
+            fourth = await RawTab().connect(url(port))
+            assert await fourth.wait_for(lambda: _markdown(fourth, "The lab is full"), 60)
+            await first.close()
+            entered = await third.wait_for(lambda: third.find_containing("GuiMarkdownMessage", READOUTS), 120)
+            note_gone = not _markdown(third, "The lab is full")
+            still_waiting = _markdown(fourth, "The lab is full") and not fourth.find("GuiUplotMessage", SCOPE)
+            for tab in (second, third, fourth):
+                await tab.close()
+            return full, lab_while_full, entered, note_gone, still_waiting
+        full, lab_while_full, entered, note_gone, still_waiting = run_async(scenario())
+    assert full and "ask your instructor" in full and not lab_while_full
+    assert entered and note_gone and still_waiting
+    assert log.read_text().count("the lab is full") == 1
+
+
+@pytest.mark.skipif(shutil.which("haproxy") is None, reason="HAProxy is not installed (apt-get install haproxy)")
+def test_a_full_hall_answers_with_the_full_page(tmp_path):
+    """``serve --workers 2 --max-tabs 1``: HAProxy lets each process take its tab and
+    ``PAGE_LOADS`` more connections (they wait at the full note in the tab), spread over both
+    processes; beyond, a page load gets HAProxy's "The lab is full" page instead of a slow lab."""
+    import urllib.error
+    import urllib.request
+
+    from app.commands.load_bench import lab_server
+    from app.hall import PAGE_LOADS
+    port = 8470
+    log = tmp_path / "hall.log"
+    with lab_server(port, 2, "kalman_noise", log, ("--max-tabs", "1", "--data-dir", str(tmp_path / "data"))):
+        async def scenario():
+            tabs = [await RawTab().connect(url(port)) for _ in range(2 * (1 + PAGE_LOADS))]
+            await asyncio.gather(*(t.wait_for(lambda t=t: t.find("GuiUplotMessage", SCOPE)
+                                              or _markdown(t, "The lab is full"), 120) for t in tabs))
+            labs = sum(1 for t in tabs if t.find("GuiUplotMessage", SCOPE))
+            waiting = sum(1 for t in tabs if _markdown(t, "The lab is full"))
+
+            def page() -> tuple[int, str]:
+                try:
+                    with urllib.request.urlopen(url(port), timeout=30) as answer:
+                        return answer.status, ""
+                except urllib.error.HTTPError as error:
+                    return error.code, error.read().decode()
+            status, text = await asyncio.to_thread(page)
+            for tab in tabs:
+                await tab.close()
+            return labs, waiting, status, text
+        labs, waiting, status, text = run_async(scenario())
+    print(f"\nfull hall: {labs} labs, {waiting} tabs at the full note; the next page load: {status}")
+    assert labs == 2 and waiting == 2 * PAGE_LOADS
+    assert status == 503 and "The lab is full" in text and "ask your instructor" in text
+
+
+def test_memory_returns_after_many_tabs_close(tmp_path):
+    """30 tabs open at once and close: the server's memory comes back to within 20 % of what it
+    was before them (after a first tab, which caches what every tab shares)."""
+    from tests.wsclient import process_rss_mb
+    port = 8466
+    with lab_process(port, data_dir=tmp_path, log=tmp_path / "server.log") as server:
+        async def scenario():
+            warm = await _lab_tab(port)
+            await warm.close()
+            await asyncio.sleep(5)
+            start = process_rss_mb(server.pid)
+            tabs = [await RawTab().connect(url(port)) for _ in range(30)]
+            built = await asyncio.gather(*(t.wait_for(lambda t=t: t.find("GuiUplotMessage", SCOPE), 300)
+                                           for t in tabs))
+            await asyncio.sleep(3)
+            peak = process_rss_mb(server.pid)
+            for tab in tabs:
+                await tab.close()
+            await asyncio.sleep(8)
+            return start, peak, process_rss_mb(server.pid), sum(map(bool, built))
+        start, peak, after, built = run_async(scenario())
+    print(f"\nmemory: {start:.0f} MB -> {built} tabs {peak:.0f} MB -> after they closed {after:.0f} MB "
+          f"({100 * (after / start - 1):+.0f} %)")
+    assert built == 30 and after <= 1.2 * start

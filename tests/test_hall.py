@@ -198,3 +198,17 @@ def test_browser_through_haproxy(tmp_path, browser):
             assert not tab.errors, tab.errors
         finally:
             tab.page.close()
+
+
+def test_configuration_caps_connections_per_process(tmp_path):
+    from app.hall import PAGE_LOADS
+    config = haproxy_config("0.0.0.0", 8080, [("127.0.0.1", 8081), ("127.0.0.1", 8082)], max_tabs=60)
+    assert config.count(f"maxconn {60 + PAGE_LOADS}") == 2 and "timeout queue" in config
+    assert "The lab is full" in config
+    assert "    server lab1 10.0.0.5:8080\n" in haproxy_config("0.0.0.0", 80, [("10.0.0.5", 8080)])   # no cap
+    if HAPROXY is None:
+        pytest.skip("HAProxy is not installed")
+    path = tmp_path / "haproxy.cfg"
+    path.write_text(config)
+    checked = subprocess.run([HAPROXY, "-c", "-f", str(path)], check=False, capture_output=True, text=True)
+    assert checked.returncode == 0, checked.stdout + checked.stderr

@@ -5,7 +5,7 @@ import threading
 
 import pytest
 
-from app.infra.access import OriginPolicy, check_host, check_port, is_loopback, new_token, token_matches
+from app.infra.access import Admission, OriginPolicy, check_host, check_port, is_loopback, new_token, token_matches
 from app.infra.store import CODE_ALPHABET, Store, StoreError, StoreUnavailable, code_prefix, normalise_code
 from lab_modules.parameters import ParameterError
 
@@ -179,3 +179,28 @@ def test_a_foreign_database_is_refused_when_opened(tmp_path):
     (tmp_path / "other" / "lab.sqlite3").write_bytes(b"not a database at all " * 500)
     with pytest.raises(StoreUnavailable, match="damaged"):
         Store(tmp_path / "other")
+
+
+def test_admission_lets_tabs_in_first_come_first_served():
+    admission = Admission(limit=2)
+    assert admission.try_enter("a") and admission.try_enter("b") and not admission.try_enter("c")
+    entered, closed = [], {"e": False}
+
+    def wait(holder):
+        if admission.wait_to_enter(holder, lambda: closed.get(holder, False)):
+            entered.append(holder)
+    waiting = []
+    for holder in ("c", "d", "e"):
+        waiting.append(threading.Thread(target=wait, args=(holder,)))
+        waiting[-1].start()
+        while len(admission.line) < len(waiting):      # in line in this order
+            threading.Event().wait(0.01)
+    closed["e"] = True
+    admission.leave("e")                               # a waiting tab that closes leaves the line
+    waiting[2].join(10)
+    admission.leave("a")
+    waiting[0].join(10)
+    assert entered == ["c"] and not admission.try_enter("x")      # d waits first: x may not jump the line
+    admission.leave("b")
+    waiting[1].join(10)
+    assert entered == ["c", "d"] and admission.holders == {"c", "d"} and not admission.line

@@ -1,4 +1,5 @@
-"""Who may use the lab: address checks at start-up, the class token, the Origin allow-list.
+"""Who may use the lab: address checks at start-up, the class token, the Origin allow-list,
+and how many tabs one process gives a lab.
 
 - ``check_host`` / ``check_port`` / ``check_bindable`` validate ``--host`` and
   ``--port`` before anything starts (``ParameterError``: one line, exit 2).
@@ -11,16 +12,21 @@
   another web page a student visits cannot open sessions on the lab.
   Clients without an Origin (not a browser) are let through: the token is
   what keeps them out.
+- ``Admission``: at most ``--max-tabs`` tabs of one process have a lab; a tab
+  beyond waits at a "the lab is full" note and gets in when a place is free.
 """
 
 from __future__ import annotations
 
+import collections
 import errno
 import hmac
 import ipaddress
 import secrets
 import socket
+import sys
 import threading
+from collections.abc import Callable
 from urllib.parse import urlsplit
 
 from lab_modules.parameters import ParameterError
@@ -30,6 +36,11 @@ TOKEN_ALPHABET = "abcdefghjkmnpqrstuvwxyz23456789"
 TOKEN_LENGTH = 8
 RESOLVE_TIMEOUT_S = 3.0
 LOOPBACK_NAMES = ("localhost",)
+#: Tabs one lab process gives a lab by default (``--max-tabs``): one process held 60 tabs at >= 23.9
+#: scope updates/s each on the 2-core test machine (README, "A lecture hall"), and the GIL keeps a
+#: process to about one core, so this is also the measured capacity per core.
+TABS_PER_PROCESS = 60
+MAX_TABS_LIMIT = 10_000
 
 
 def check_port(text) -> int:
@@ -165,3 +176,63 @@ class OriginPolicy:
             return False
         scheme = key.split("://", 1)[0]
         return _origin_key(f"{scheme}://{host_header}") == key
+
+
+def check_max_tabs(text) -> int:
+    """``--max-tabs`` as an int in 1 ... ``MAX_TABS_LIMIT``, or ``ParameterError``."""
+    try:
+        tabs = int(str(text).strip())
+    except ValueError:
+        raise ParameterError(f"--max-tabs={text!r} is not a whole number: expected 1 ... {MAX_TABS_LIMIT}") from None
+    if not 1 <= tabs <= MAX_TABS_LIMIT:
+        raise ParameterError(f"--max-tabs={text!r} is out of range: expected 1 ... {MAX_TABS_LIMIT}")
+    return tabs
+
+
+class Admission:
+    """The tabs of one process that have a lab: at most ``limit``.  A tab beyond waits for a
+    place in line, first come first served (``wait_to_enter``); the first refusal while full is
+    logged once, again only after the lab was below 90 % of its places."""
+
+    def __init__(self, limit: int = TABS_PER_PROCESS):
+        self.limit = limit
+        self.holders: set = set()
+        self.line: collections.deque = collections.deque()
+        self.changed = threading.Condition()
+        self.full_logged = False
+
+    def try_enter(self, holder) -> bool:
+        """Take a place if one is free and nobody waits for it; else log (once) that the lab is full."""
+        with self.changed:
+            if len(self.holders) < self.limit and not self.line:
+                self.holders.add(holder)
+                return True
+            if not self.full_logged:
+                print(f"the lab is full ({self.limit} tabs, --max-tabs): new tabs wait for a place",
+                      file=sys.stderr, flush=True)
+                self.full_logged = True
+            return False
+
+    def wait_to_enter(self, holder, given_up: Callable[[], bool]) -> bool:
+        """Wait in line until there is a place (True: ``holder`` has it) or ``given_up()`` (False)."""
+        with self.changed:
+            self.line.append(holder)
+            try:
+                self.changed.wait_for(lambda: given_up() or (self.line[0] is holder
+                                                             and len(self.holders) < self.limit))
+            finally:
+                self.line.remove(holder)
+                self.changed.notify_all()             # the next in line may be first now
+            if given_up():
+                return False
+            self.holders.add(holder)
+            return True
+
+    def leave(self, holder) -> None:
+        """``holder`` gives its place back (if it had one); waiting tabs look again (also the one
+        that closed while waiting)."""
+        with self.changed:
+            self.holders.discard(holder)
+            if len(self.holders) < 0.9 * self.limit:
+                self.full_logged = False
+            self.changed.notify_all()

@@ -21,16 +21,19 @@ handles are gone).  A tab closed while its lab is being built stops building.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import sys
 import threading
 import time
 import traceback
+import weakref
 from collections.abc import Callable
 
 import viser
 
 from app.infra import layout
+from app.infra.access import Admission
 from app.infra.store import Store
 from app.panels import entry, scope, worksheets
 from app.panels.actions import ActionPanel
@@ -54,17 +57,22 @@ from lab_modules.exercises import Exercise, registry
 from lab_modules.parameters import Parameter, ParameterError
 
 SETTLE_BEFORE_REMOVAL_S = 0.3     # an exercise switch waits this long between the last chart update and removal
+FULL = ("### The lab is full\n\nEvery place on this lab server is taken. This tab enters by itself as soon "
+        "as a place is free; or try again in a minute, or ask your instructor.")
 
 
 class LabSession:
     """The lab in one browser tab."""
 
     def __init__(self, client: viser.ClientHandle, exercise: Exercise, store: Store | None = None,
-                 token: str | None = None, on_refused: Callable[[str], None] | None = None):
-        """Cheap: the lab is built on the tab's worker thread (after the class token, if one is set)."""
+                 token: str | None = None, on_refused: Callable[[str], None] | None = None,
+                 admission: Admission | None = None):
+        """Cheap: the lab is built on the tab's worker thread (after the class token, if one is set,
+        and once ``admission`` has a place for it)."""
         self.client = client
         self.exercises = registry()
         self.token = token
+        self.admission = admission
         self.on_refused = on_refused or (lambda _reason: None)   # disconnects the tab (too many wrong tokens)
         self.gui_lock = threading.RLock()         # writes to the GUI handles; held while the GUI is rebuilt
         self.generations = itertools.count()
@@ -140,9 +148,19 @@ class LabSession:
             self._start_restored(exercise)
 
     # -- life cycle ------------------------------------------------------------------
+    def _wait_for_a_place(self) -> None:
+        """Hold the tab at a "the lab is full" note until the process has a place for its lab."""
+        if self.admission is None or self.admission.try_enter(self):
+            return
+        note = self.client.gui.add_markdown(FULL)
+        if not self.admission.wait_to_enter(self, lambda: self.closed):
+            raise TabClosed
+        note.remove()
+
     def _start_restored(self, exercise: Exercise) -> None:
         """Start the experiment this browser autosaved last (a reloaded tab gets its work back),
-        else ``exercise`` on its defaults (call holding ``gui_lock``)."""
+        else ``exercise`` on its defaults (call holding ``gui_lock``), once the lab has a place."""
+        self._wait_for_a_place()
         saved = self.saved.browser_autosave(self.exercises)
         if saved is not None:
             recording = (saved.recording_name, saved.recording) if saved.recording is not None else None
@@ -206,6 +224,8 @@ class LabSession:
         """Stop the worker, simulation and analysis threads; the tab is gone (idempotent, any thread)."""
         self.worker.close()
         self.analysis.close()
+        if self.admission is not None:
+            self.admission.leave(self)            # also wakes this tab if it waits for a place
 
     def report(self, text: str) -> None:
         """A one-line message for the tab from outside (e.g. a message the server refused)."""
@@ -283,11 +303,15 @@ class LabSession:
                 self.docks.put_worksheet_beside(gui, toggle.value)
         toggle.on_update(on("beside", put_beside))
 
-        def show_measured(sheet: str, generation: int = self.generation) -> None:
-            with self.gui_lock:
-                if self._current(generation):
-                    self.docks.show_worksheet(sheet)
-        worksheets.when_measured(exercise, show_measured)
+        # The claims may take minutes to measure: a tab closed meanwhile must not be kept alive for them.
+        worksheets.when_measured(exercise, functools.partial(LabSession._show_measured, weakref.proxy(self),
+                                                             self.generation))
+
+    def _show_measured(self, generation: int, sheet: str) -> None:
+        """The worksheet with its claims measured, if ``generation`` still owns the tab."""
+        with self.gui_lock:
+            if self._current(generation):
+                self.docks.show_worksheet(sheet)
 
     def _still_current(self) -> Callable[[], bool]:
         """Whether the generation being built still owns the tab (for parts that run on threads)."""
