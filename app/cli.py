@@ -1,12 +1,13 @@
 """Command line of the lab.
 
-    python -m app [--host H] [--port P] [--exercise NAME] [--data-dir DIR] [--token T]
-                  [--max-tabs N] [--allow-origin URL ...]   start the browser lab (default; also ``serve``)
+    python -m app [--host H] [--port P] [--exercise NAME] [--data-dir DIR] [--token T | --token-file F]
+                  [--max-tabs N] [--allow-origin URL ...] [--trusted-proxy A ...]
+                                               start the browser lab (default; also ``serve``)
     python -m app serve --workers N [same options] [--worker-ports FIRST]   N lab processes behind HAProxy
     python -m app haproxy-config --backend HOST:PORT ...    HAProxy configuration for several machines
     python -m app list [--json]                exercises and their parameters
     python -m app run NAME [--set N=V ...] [--duration S] [--seed N] [--data FILE] [--json]
-    python -m app run --code KN-7Q3M [--set N=V ...] [--json]   a saved experiment, headless
+    python -m app run --code KN-7Q3M-X9TA-HPRW [--set N=V ...] [--json]   a saved experiment, headless
     python -m app save NAME [--set N=V ...] [--data FILE]        save an experiment, print its code
     python -m app bench [--json] [--browser]   throughput benchmark; --browser: slider-to-readout latency
     python -m app reproduce [--json] [--quick] [--html DIR] [--exercise NAME ...]
@@ -46,7 +47,14 @@ def _serve_options(parser: argparse.ArgumentParser, defaults: bool) -> None:
     parser.add_argument("--data-dir", default=default(None), metavar="DIR",
                         help="where saved experiments live (default ~/.local/share/amb-lab)")
     parser.add_argument("--token", default=default(None),
-                        help="class token asked of every new tab when not on loopback (default: generated)")
+                        help="class token asked of every new tab when not on loopback (default: generated; "
+                             "the process list shows it to every user: prefer --token-file or "
+                             f"${access.TOKEN_VARIABLE})")
+    parser.add_argument("--token-file", default=default(None), metavar="FILE",
+                        help="read the class token from the first line of FILE")
+    parser.add_argument("--trusted-proxy", action="append", default=default([]), metavar="ADDRESS",
+                        help="a proxy whose X-Forwarded-For names the student's address (repeatable; "
+                             "loopback is always trusted), e.g. the balancer in front of several machines")
     parser.add_argument("--max-tabs", default=default(str(access.TABS_PER_PROCESS)), metavar="N",
                         help=f"tabs one lab process gives a lab (default {access.TABS_PER_PROCESS}, what one core "
                              "streams at full rate); further tabs wait at a 'the lab is full' note")
@@ -78,7 +86,7 @@ def _parser() -> argparse.ArgumentParser:
     listing.add_argument("--json", action="store_true", help="print JSON")
     run = sub.add_parser("run", help="run one exercise headless and print its metrics")
     run.add_argument("exercise", nargs="?", help="exercise name (or --code)")
-    run.add_argument("--code", default=None, help="run a saved experiment (e.g. KN-7Q3M)")
+    run.add_argument("--code", default=None, help="run a saved experiment (e.g. KN-7Q3M-X9TA-HPRW)")
     run.add_argument("--data-dir", default=None, metavar="DIR", help="where saved experiments live")
     run.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                      help="override a parameter (repeatable)")

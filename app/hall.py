@@ -34,6 +34,7 @@ import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
 
+from app.infra.access import TOKEN_VARIABLE, check_bindable
 from lab_modules.parameters import ParameterError
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -82,6 +83,7 @@ defaults
 
 frontend lab
     bind {bind}:{bind_port}
+    option forwardfor                    # the lab throttles wrong class tokens per client address
     default_backend labs
 
 backend labs
@@ -147,13 +149,14 @@ class Worker:
     index: int
     port: int
     command: list[str]
+    environment: dict[str, str]
     process: subprocess.Popen | None = None
     started: float = 0.0
     crashes: int = 0                   # quick successive exits, for the restart delay
     restart_at: float | None = None
 
     def start(self) -> None:
-        self.process = subprocess.Popen(self.command, cwd=ROOT, stdin=subprocess.DEVNULL,
+        self.process = subprocess.Popen(self.command, cwd=ROOT, env=self.environment, stdin=subprocess.DEVNULL,
                                         stdout=subprocess.DEVNULL, start_new_session=True,
                                         preexec_fn=_die_with_parent)  # noqa: PLW1509 (no threads here)
         self.started, self.restart_at = time.monotonic(), None
@@ -164,18 +167,27 @@ class Worker:
 
 
 def worker_command(port: int, settings, allow_origins: list[str]) -> list[str]:
-    """A worker: the single-process lab on a loopback port with the hall's settings.  The class
-    token is passed on explicitly: a worker on loopback would otherwise ask none, and every tab
-    reaches it through HAProxy from the network."""
+    """A worker: the single-process lab on a loopback port with the hall's settings (the class
+    token goes in its environment: ``worker_environment``)."""
     command = [sys.executable, "-m", "app", "--host", "127.0.0.1", "--port", str(port),
                "--exercise", settings.exercise, "--max-tabs", str(settings.max_tabs)]
-    if settings.token is not None:
-        command += ["--token", settings.token]
+    for proxy in settings.trusted_proxies:
+        command += ["--trusted-proxy", proxy]
     if settings.data_dir is not None:                 # one saved-experiments database for all workers
         command += ["--data-dir", str(settings.data_dir)]
     for origin in allow_origins:
         command += ["--allow-origin", origin]
     return command
+
+
+def worker_environment(settings) -> dict[str, str]:
+    """The workers' environment: the class token is passed on (a worker on loopback would otherwise
+    ask none, and every tab reaches it through HAProxy from the network), in the environment, which
+    only the instructor's user can read, not on the command line, which the process list shows to all."""
+    environment = {name: value for name, value in os.environ.items() if name != TOKEN_VARIABLE}
+    if settings.token is not None:
+        environment[TOKEN_VARIABLE] = settings.token
+    return environment
 
 
 def _ready(url: str) -> bool:
@@ -213,7 +225,6 @@ def _raise_stop(signum, _frame) -> None:
 def serve_hall(settings, workers: int, first_worker_port: int | None, allow_origins: list[str]) -> int:
     """Serve the lab (``settings``: ``app.server.Settings``) with ``workers`` processes behind
     HAProxy until Ctrl-C or SIGTERM."""
-    from app.infra.access import check_bindable
     from app.infra.store import Store, StoreError
     from app.server import shown_url
     haproxy = shutil.which("haproxy")
@@ -237,7 +248,8 @@ def serve_hall(settings, workers: int, first_worker_port: int | None, allow_orig
         Store(settings.data_dir).close()      # create the shared database once, before the workers race
     except StoreError as error:
         raise ParameterError(str(error)) from None
-    pool = [Worker(k + 1, p, worker_command(p, settings, allow_origins)) for k, p in enumerate(ports)]
+    pool = [Worker(k + 1, p, worker_command(p, settings, allow_origins), worker_environment(settings))
+            for k, p in enumerate(ports)]
     previous = {s: signal.signal(s, _raise_stop) for s in (signal.SIGINT, signal.SIGTERM)}
     proxy: subprocess.Popen | None = None
     with tempfile.TemporaryDirectory(prefix="amb-lab-hall-") as scratch:
@@ -262,9 +274,8 @@ def serve_hall(settings, workers: int, first_worker_port: int | None, allow_orig
                 return 1
             print(f"AMB estimation lab: open {shown_url(host, port)} in a browser "
                   f"({workers} lab processes behind HAProxy; Ctrl+C to stop)", flush=True)
-            if settings.token is not None:
-                how = "generated; set your own with --token" if settings.token_generated else "from --token"
-                print(f"Class token: {settings.token} ({how}); every new tab asks for it", flush=True)
+            for line in settings.token_lines():
+                print(line, flush=True)
             while True:
                 time.sleep(POLL_S)
                 if proxy.poll() is not None:

@@ -275,3 +275,78 @@ def test_memory_returns_after_many_tabs_close(tmp_path):
     print(f"\nmemory: {start:.0f} MB -> {built} tabs {peak:.0f} MB -> after they closed {after:.0f} MB "
           f"({100 * (after / start - 1):+.0f} %)")
     assert built == 30 and after <= 1.2 * start
+
+
+async def _try_token(tab: RawTab, token: str) -> str:
+    """Type ``token``, press Enter the lab; the gate's answer (or "" if the lab was built)."""
+    field = tab.find("GuiTextMessage", "Class token")
+    note = tab.find_containing("GuiMarkdownMessage", "⚠️")
+    before = tab.elements[note]["content"] if note else ""
+    await tab.set_value(field, token)
+    await tab.set_value(tab.find("GuiButtonMessage", "Enter the lab"), True)
+
+    def answered():
+        uuid = tab.find_containing("GuiMarkdownMessage", "⚠️")
+        text = tab.elements[uuid]["content"] if uuid else ""
+        return text if text and text != before else tab.find("GuiUplotMessage", SCOPE) or tab.closed.is_set()
+    result = await tab.wait_for(answered, 60)
+    return result if isinstance(result, str) and result.startswith("⚠️") else ""
+
+
+def test_wrong_class_tokens_are_throttled_across_connections(tmp_path):
+    """Tabs from one address, reconnecting after every fifth wrong try (when the tab is closed),
+    use up the address's allowance: ``TOKEN_TRIES_BURST`` plus what refills meanwhile; then a
+    try is answered "too many" without being checked (until the next try refills); the log names
+    the address once.  Before: every try of every connection was checked (35-45 guesses/s)."""
+    from app.infra.access import TOKEN_TRIES_BURST, TOKEN_TRIES_PER_MINUTE
+    port = 8467
+    log = tmp_path / "server.log"
+    with lab_process(port, "--token", "kalman42", data_dir=tmp_path, log=log):
+        async def scenario():
+            checked, start = 0, time.perf_counter()
+            while True:
+                tab = await RawTab().connect(url(port))
+                await tab.wait_for(lambda t=tab: t.find("GuiTextMessage", "Class token"), 60)
+                while not tab.closed.is_set():
+                    answer = await _try_token(tab, f"wrong{checked}")
+                    if "Too many wrong class tokens" in answer:
+                        await tab.close()
+                        return checked, time.perf_counter() - start, answer
+                    checked += 1
+                    assert checked < 40, "never throttled"
+        checked, seconds, answer = run_async(scenario())
+    allowance = TOKEN_TRIES_BURST + seconds * TOKEN_TRIES_PER_MINUTE / 60
+    print(f"\ntoken guessing: throttled after {checked} checked wrong tries in {seconds:.0f} s")
+    assert TOKEN_TRIES_BURST <= checked <= allowance + 1
+    assert "tries left" not in answer                   # not checked, and not a try of the tab either
+    assert log.read_text().count("too many failed tries from 127.0.0.1") == 1
+
+
+@pytest.mark.skipif(shutil.which("haproxy") is None, reason="HAProxy is not installed (apt-get install haproxy)")
+def test_the_hall_keeps_the_token_off_every_command_line(tmp_path):
+    """``serve --workers 2`` with the token in the environment: no process of the hall shows it on
+    its command line, and a tab through HAProxy is asked for it and let in."""
+    from app.commands.load_bench import lab_server, process_tree
+    from app.infra.access import TOKEN_VARIABLE
+    port = 8473
+    token = "q7mz-k3pt-9hwa"
+    os.environ[TOKEN_VARIABLE] = token
+    try:
+        with lab_server(port, 2, "kalman_noise", tmp_path / "hall.log", ("--data-dir", str(tmp_path / "data"))) \
+                as supervisor:
+            time.sleep(3)
+            command_lines = [(REPO / "x").parent.joinpath("/proc", str(pid), "cmdline").read_bytes()
+                             for pid in process_tree(supervisor.pid)]
+
+            async def scenario():
+                tab = await RawTab().connect(url(port))
+                await tab.wait_for(lambda: tab.find("GuiTextMessage", "Class token"), 120)
+                await _try_token(tab, token.upper())
+                built = await tab.wait_for(lambda: tab.find("GuiUplotMessage", SCOPE), 120)
+                await tab.close()
+                return built
+            built = run_async(scenario())
+    finally:
+        del os.environ[TOKEN_VARIABLE]
+    assert len(command_lines) >= 4 and not any(token.encode() in line for line in command_lines)
+    assert built

@@ -86,3 +86,31 @@ def test_a_tab_that_keeps_changing_is_autosaved_every_few_seconds(tmp_path, monk
             written.append(now[0])
     gaps = [b - a for a, b in zip([1000.0, *written], written, strict=False)]
     assert len(written) >= 2 and max(gaps) <= AUTOSAVE_AT_MOST_S + 0.25, written
+
+
+def test_open_is_throttled_per_tab_and_address(tmp_path):
+    """Codes that open nothing: a tab may try a few, an address a few more across its tabs;
+    beyond, Open waits and does not look the code up (so a good guess teaches nothing)."""
+    from app.infra.access import CODE_TRIES_BURST, TAB_CODE_TRIES_BURST, Throttle
+    store = Store(tmp_path)
+    real = store.save("kalman_noise", {"seed": 1})
+    by_address = Throttle("experiment codes", CODE_TRIES_BURST, 10, log=False)
+    tabs = []
+    for _ in range(3):
+        tab, _, _ = _tab(store)
+        tab.code_tries, tab.address = by_address, "10.0.0.5"
+        tabs.append(tab)
+    opened = []
+    notes = []
+    for tab in tabs:
+        for k in range(TAB_CODE_TRIES_BURST + 1):
+            tab.open(f"KN-AAAA-BBBB-CC{k:02d}".replace("0", "2").replace("1", "3"), {"kalman_noise": "ex"},
+                     lambda *args: opened.append(args))
+            notes.append(tab.saved_note.content)
+    misses = sum(1 for n in notes if "no experiment is saved" in n)
+    assert misses == CODE_TRIES_BURST and notes[TAB_CODE_TRIES_BURST].startswith("⚠️ Too many codes")
+    tabs[2].open(real, {"kalman_noise": "ex"}, lambda *args: opened.append(args))
+    assert not opened and "Too many codes" in tabs[2].saved_note.content
+    fresh, _, _ = _tab(store)                                # another address opens its code at once
+    fresh.open(real, {"kalman_noise": "ex"}, lambda *args: opened.append(args))
+    assert len(opened) == 1 and fresh.saved_note.content == f"Opened **{real}**."

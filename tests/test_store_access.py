@@ -1,11 +1,22 @@
 """Saved experiments (app/infra/store.py) and the access checks (app/infra/access.py)."""
 
+import re
 import sqlite3
 import threading
 
 import pytest
 
-from app.infra.access import Admission, OriginPolicy, check_host, check_port, is_loopback, new_token, token_matches
+from app.infra.access import (
+    Admission,
+    OriginPolicy,
+    Throttle,
+    check_host,
+    check_port,
+    client_address,
+    is_loopback,
+    new_token,
+    token_matches,
+)
 from app.infra.store import CODE_ALPHABET, Store, StoreError, StoreUnavailable, code_prefix, normalise_code
 from lab_modules.parameters import ParameterError
 
@@ -13,7 +24,7 @@ from lab_modules.parameters import ParameterError
 def test_save_and_load_round_trip(tmp_path):
     store = Store(tmp_path)
     code = store.save("kalman_noise", {"gain_factor": 1.5, "feedback": "estimated"}, "run.csv", b"t,x\n1,2\n")
-    assert code.startswith("KN-") and len(code) == 7 and all(c in CODE_ALPHABET for c in code[3:])
+    assert re.fullmatch(rf"KN-[{CODE_ALPHABET}]{{4}}-[{CODE_ALPHABET}]{{4}}-[{CODE_ALPHABET}]{{4}}", code)
     loaded = Store(tmp_path).load(code.lower().replace("-", " "))      # another connection, typed loosely
     assert (loaded.exercise, loaded.kind) == ("kalman_noise", "saved")
     assert loaded.parameters == {"gain_factor": 1.5, "feedback": "estimated"}
@@ -37,7 +48,7 @@ def test_autosave_overwrites_only_its_slot(tmp_path):
 
 def test_codes_are_checked(tmp_path):
     store = Store(tmp_path)
-    for bad in ("", "KN", "KN-0000", "K1-ABCD", "KN-ABCDE", "<b>x</b>"):
+    for bad in ("", "KN", "KN-0000", "K1-ABCD", "KN-ABCDE", "<b>x</b>", "KN-ABCD-EFGH", "ΚΝ-ABCD"):
         with pytest.raises(StoreError, match="not an experiment code"):
             normalise_code(bad)
     with pytest.raises(StoreError, match="no experiment is saved under KN-ABCD"):
@@ -204,3 +215,55 @@ def test_admission_lets_tabs_in_first_come_first_served():
     admission.leave("b")
     waiting[1].join(10)
     assert entered == ["c", "d"] and admission.holders == {"c", "d"} and not admission.line
+
+
+def test_throttle_counts_failed_tries_per_address(monkeypatch, capsys):
+    from app.infra import access
+    now = [100.0]
+    monkeypatch.setattr(access.time, "monotonic", lambda: now[0])
+    throttle = Throttle("class token", burst=3, per_minute=6)
+    for _ in range(3):
+        assert throttle.wait_s("10.0.0.5") == 0
+        throttle.failed("10.0.0.5")
+    assert throttle.wait_s("10.0.0.5") == pytest.approx(10.0)        # one try every 10 s from now on
+    assert throttle.wait_s("10.0.0.6") == 0                          # another address is not held up
+    now[0] += 10.0
+    assert throttle.wait_s("10.0.0.5") == 0
+    throttle.failed("10.0.0.5")
+    throttle.failed("10.0.0.5")
+    assert capsys.readouterr().err.count("too many failed tries from 10.0.0.5") == 1
+
+
+def test_client_address_believes_only_trusted_proxies():
+    assert client_address("127.0.0.1", "203.0.113.9", frozenset()) == "203.0.113.9"   # the hall's HAProxy
+    assert client_address("127.0.0.1", "1.1.1.1, 203.0.113.9", frozenset()) == "203.0.113.9"   # the proxy's own
+    assert client_address("203.0.113.9", "1.1.1.1", frozenset()) == "203.0.113.9"     # a client's claim
+    assert client_address("10.0.0.2", "203.0.113.9", frozenset({"10.0.0.2"})) == "203.0.113.9"
+    assert client_address(None, None, frozenset()) == "unknown"
+
+
+def test_class_tokens_come_from_flag_file_or_environment(tmp_path):
+    from app.infra.access import TOKEN_VARIABLE, chosen_token, token_bits
+    path = tmp_path / "token.txt"
+    path.write_text("  Strong-Token-4711\nsecond line\n")
+    assert chosen_token("given1", str(path), {TOKEN_VARIABLE: "envtoken"}) == ("given1", "from --token")
+    assert chosen_token(None, str(path), {TOKEN_VARIABLE: "envtoken"}) == ("Strong-Token-4711", "from --token-file")
+    assert chosen_token(None, None, {TOKEN_VARIABLE: "envtoken"}) == ("envtoken", f"from {TOKEN_VARIABLE}")
+    assert chosen_token(None, None, {}) == (None, "")
+    with pytest.raises(ParameterError, match="--token-file .*No such file"):
+        chosen_token(None, str(tmp_path / "missing"), {})
+    with pytest.raises(ParameterError, match=TOKEN_VARIABLE):
+        chosen_token(None, None, {TOKEN_VARIABLE: "a b"})
+    generated = new_token()
+    assert re.fullmatch(r"[a-z2-9]{4}-[a-z2-9]{4}-[a-z2-9]{4}", generated) and token_bits(generated) > 59
+    assert token_matches(generated, generated.replace("-", " ").upper()) and token_bits("kalman42") < 50
+
+
+def test_old_short_codes_keep_opening(tmp_path):
+    """Codes made before the longer ones (two letters and four characters) open as before."""
+    store = Store(tmp_path)
+    with sqlite3.connect(store.path) as db:
+        db.execute("INSERT INTO experiments VALUES ('KN-7Q3M', 'saved', 'kalman_noise', '{\"seed\": 4}', NULL, "
+                   "NULL, 0, 0)")
+    assert store.load("kn 7q3m").parameters == {"seed": 4} and normalise_code("KN7Q3M") == "KN-7Q3M"
+    assert normalise_code("kn7q3mx9tahprw") == "KN-7Q3M-X9TA-HPRW"

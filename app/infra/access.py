@@ -4,9 +4,16 @@ and how many tabs one process gives a lab.
 - ``check_host`` / ``check_port`` / ``check_bindable`` validate ``--host`` and
   ``--port`` before anything starts (``ParameterError``: one line, exit 2).
 - Served on loopback only, the lab is open to the machine's own browser.  On
-  any other address it asks each new tab for the class token (``--token``, or
-  one generated and printed at start); ``token_matches`` compares in constant
-  time.
+  any other address it asks each new tab for the class token (``--token``,
+  ``--token-file``, the environment variable ``TOKEN_VARIABLE``, or one generated
+  and printed at start: ``TOKEN_GROUPS`` groups of four characters, about 59
+  bits); ``token_matches`` compares in constant time.  A lecture hall hands the
+  token to its processes in their environment, never on a command line (which
+  every user of the machine can read in the process list).
+- ``Throttle``: failed tries (wrong class tokens, experiment codes that open
+  nothing) per client address, across all its tabs and connections, logged once
+  per address.  The address is the websocket's peer, or the ``X-Forwarded-For``
+  HAProxy adds when the peer is a trusted proxy (loopback, ``--trusted-proxy``).
 - A websocket's ``Origin`` header (sent by every browser) must name the host
   the tab asked for (the ``Host`` header), or one of the allowed origins:
   another web page a student visits cannot open sessions on the lab.
@@ -22,18 +29,24 @@ import collections
 import errno
 import hmac
 import ipaddress
+import math
 import secrets
 import socket
 import sys
 import threading
+import time
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from urllib.parse import urlsplit
 
 from lab_modules.parameters import ParameterError
 
 #: Token characters: readable aloud and on a projector (no 0/O, 1/I/L).
 TOKEN_ALPHABET = "abcdefghjkmnpqrstuvwxyz23456789"
-TOKEN_LENGTH = 8
+TOKEN_GROUPS = 3                  # of four characters: 12 × log2(31) = 59 bits
+TOKEN_VARIABLE = "AMB_LAB_TOKEN"
+#: A chosen token weaker than this is worth a warning at start [bits].
+STRONG_TOKEN_BITS = 50
 RESOLVE_TIMEOUT_S = 3.0
 LOOPBACK_NAMES = ("localhost",)
 #: Tabs one lab process gives a lab by default (``--max-tabs``): one process held 60 tabs at >= 23.9
@@ -41,6 +54,13 @@ LOOPBACK_NAMES = ("localhost",)
 #: process to about one core, so this is also the measured capacity per core.
 TABS_PER_PROCESS = 60
 MAX_TABS_LIMIT = 10_000
+#: Wrong class tokens an address may try at once, and per minute after that (a student who
+#: mistypes a few times is not held up; a word list of 10,000 takes 17 hours per lab process).
+TOKEN_TRIES_BURST, TOKEN_TRIES_PER_MINUTE = 10, 10
+#: Experiment codes that open nothing, per address (a typo or two is free) and per tab.
+CODE_TRIES_BURST, CODE_TRIES_PER_MINUTE = 10, 10
+TAB_CODE_TRIES_BURST, TAB_CODE_TRIES_PER_MINUTE = 5, 6
+MAX_ADDRESSES = 10_000            # a throttle forgets addresses back at their full allowance beyond this
 
 
 def check_port(text) -> int:
@@ -119,23 +139,55 @@ def is_loopback(host: str) -> bool:
 
 
 def new_token() -> str:
-    """A class token: ``TOKEN_LENGTH`` characters easy to read out (about 40 bits)."""
-    return "".join(secrets.choice(TOKEN_ALPHABET) for _ in range(TOKEN_LENGTH))
+    """A class token easy to read out: ``TOKEN_GROUPS`` groups of four characters (``k7mq-x3pt-9hwa``)."""
+    return "-".join("".join(secrets.choice(TOKEN_ALPHABET) for _ in range(4)) for _ in range(TOKEN_GROUPS))
 
 
-def check_token(text) -> str:
-    """``--token`` as given: 4 ... 64 visible characters, or ``ParameterError``."""
+def check_token(text, source: str = "--token") -> str:
+    """A chosen token as given: 4 ... 64 visible characters, or ``ParameterError``."""
     token = str(text).strip()
     if not 4 <= len(token) <= 64 or not token.isprintable() or " " in token:
-        raise ParameterError(f"--token must be 4 ... 64 characters without spaces (got {len(token)})")
+        raise ParameterError(f"{source} must be 4 ... 64 characters without spaces (got {len(token)})")
     return token
 
 
+def chosen_token(given: str | None, file: str | None, environment: dict) -> tuple[str | None, str]:
+    """The class token from ``--token``, ``--token-file`` (its first line) or ``TOKEN_VARIABLE``, in
+    that order, and where it came from; (None, "") if none is given."""
+    if given is not None:
+        return check_token(given), "from --token"
+    if file is not None:
+        try:
+            with open(file, encoding="utf-8") as handle:
+                first = handle.readline(1000)
+        except (OSError, UnicodeDecodeError) as error:
+            reason = error.strerror if isinstance(error, OSError) else "not a text file"
+            raise ParameterError(f"--token-file {file!r}: {reason}") from None
+        return check_token(first, "--token-file"), "from --token-file"
+    if environment.get(TOKEN_VARIABLE):
+        return check_token(environment[TOKEN_VARIABLE], TOKEN_VARIABLE), f"from {TOKEN_VARIABLE}"
+    return None, ""
+
+
+def token_bits(token: str) -> float:
+    """What guessing ``token`` takes at best [bits], from its length and the kinds of characters
+    it uses (a word or a name takes far fewer: this is an upper bound)."""
+    kinds = (str.islower, str.isupper, str.isdigit)
+    alphabet = sum(size for kind, size in zip(kinds, (26, 26, 10), strict=True) if any(kind(c) for c in token))
+    alphabet += 32 if any(not c.isalnum() for c in token) else 0
+    return len(normal_token(token)) * math.log2(max(alphabet, 2))
+
+
+def normal_token(text: str) -> str:
+    """A token as compared: letter case, spaces and dashes do not matter."""
+    return "".join(text.split()).replace("-", "").lower()
+
+
 def token_matches(expected: str, given) -> bool:
-    """Constant-time comparison; surrounding spaces and letter case don't matter."""
+    """Constant-time comparison of the ``normal_token`` forms."""
     if not isinstance(given, str):
         return False
-    return hmac.compare_digest(expected.strip().lower().encode(), given.strip().lower().encode())
+    return hmac.compare_digest(normal_token(expected).encode(), normal_token(given).encode())
 
 
 def _origin_key(origin: str) -> str | None:
@@ -236,3 +288,69 @@ class Admission:
             if len(self.holders) < 0.9 * self.limit:
                 self.full_logged = False
             self.changed.notify_all()
+
+
+class Throttle:
+    """Failed tries per client address, across all its tabs and connections (a token bucket):
+    ``burst`` at once, then one every ``60 / per_minute`` s.  The first time an address runs out
+    is logged (``what``: what was tried), once per address."""
+
+    def __init__(self, what: str, burst: int, per_minute: float, log: bool = True):
+        self.what, self.burst, self.refill_per_s, self.log = what, burst, per_minute / 60.0, log
+        self.buckets: dict[str, tuple[float, float]] = {}   # address -> (tries left, when counted)
+        self.logged: set[str] = set()
+        self.lock = threading.Lock()
+
+    def _left(self, address: str, now: float) -> float:
+        left, then = self.buckets.get(address, (self.burst, now))
+        return min(self.burst, left + (now - then) * self.refill_per_s)
+
+    def wait_s(self, address: str) -> float:
+        """How long ``address`` must wait before its next try [s] (0: it may try now)."""
+        with self.lock:
+            left = self._left(address, time.monotonic())
+        return 0.0 if left >= 1 else (1 - left) / self.refill_per_s
+
+    def failed(self, address: str) -> None:
+        """One failed try from ``address``."""
+        with self.lock:
+            now = time.monotonic()
+            left = self._left(address, now) - 1
+            self.buckets[address] = (left, now)
+            if len(self.buckets) > MAX_ADDRESSES:         # forget addresses that have their full allowance back
+                self.buckets = {a: b for a, b in self.buckets.items() if self._left(a, now) < self.burst}
+            first = left < 1 and address not in self.logged and self.log
+            if first:
+                self.logged.add(address)
+        if first:
+            print(f"{self.what}: too many failed tries from {address}; its tries are limited to "
+                  f"{self.refill_per_s * 60:g} per minute (logged once per address)", file=sys.stderr, flush=True)
+
+
+def client_address(peer: str | None, forwarded_for: str | None, trusted_proxies: frozenset[str]) -> str:
+    """The address a tab comes from: the websocket's ``peer``, or, when the peer is a trusted proxy
+    (loopback, or one of ``trusted_proxies``), the last address in its ``X-Forwarded-For`` (the one
+    the proxy added: what comes before it, the client may have written itself)."""
+    peer = peer or "unknown"
+    trusted = peer in trusted_proxies or (peer != "unknown" and _is_loopback_ip(peer))
+    if forwarded_for and trusted:
+        return forwarded_for.split(",")[-1].strip() or peer
+    return peer
+
+
+def _is_loopback_ip(address: str) -> bool:
+    try:
+        return ipaddress.ip_address(address).is_loopback
+    except ValueError:
+        return False
+
+
+@dataclass
+class Limits:
+    """What the tabs of one process share to keep each other within bounds."""
+
+    admission: Admission = field(default_factory=Admission)
+    token_tries: Throttle = field(default_factory=lambda: Throttle("class token", TOKEN_TRIES_BURST,
+                                                                   TOKEN_TRIES_PER_MINUTE))
+    code_tries: Throttle = field(default_factory=lambda: Throttle("experiment codes", CODE_TRIES_BURST,
+                                                                  CODE_TRIES_PER_MINUTE))

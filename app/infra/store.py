@@ -2,8 +2,10 @@
 
 An experiment is an exercise name, its parameter values and, for exercises
 that take one, the uploaded recording (file name and bytes).  Each has a
-short, readable code such as ``KN-7Q3M`` (two letters from the exercise
-name, four random characters without look-alikes such as 0/O and 1/I).
+readable code such as ``KN-7Q3M-X9TA-HPRW``: two letters from the exercise
+name, then twelve random characters without look-alikes such as 0/O and 1/I,
+about 59 bits, so that guessing codes is hopeless.  Codes of the older form,
+four random characters (``KN-7Q3M``), keep opening.
 
 Two kinds share the table: a tab's *autosave* (rewritten on every change,
 debounced by the tab) and a *saved* snapshot (the Save button, or
@@ -39,7 +41,9 @@ from pathlib import Path
 
 #: Characters of the random part of a code: no 0/O, 1/I/L look-alikes.
 CODE_ALPHABET = "ABCDEFGHJKMNPQRSTUVWXYZ23456789"
-CODE_RANDOM_CHARS = 4
+CODE_RANDOM_CHARS = 12            # 12 × log2(31) = 59 bits, written in groups of four
+CODE_GROUP = 4
+OLD_CODE_RANDOM_CHARS = 4         # codes made before: still accepted
 BUSY_TIMEOUT_S = 5.0
 DATABASE_NAME = "lab.sqlite3"
 
@@ -119,18 +123,22 @@ def code_prefix(exercise: str) -> str:
     return (words[0][0] + (words[-1][0] if len(words) > 1 else words[0][-1])).upper()
 
 
+def grouped(prefix: str, random_part: str) -> str:
+    """A code as stored and shown: the prefix, then the random part in groups of ``CODE_GROUP``."""
+    groups = [random_part[k:k + CODE_GROUP] for k in range(0, len(random_part), CODE_GROUP)]
+    return "-".join([prefix, *groups])
+
+
 def normalise_code(text: str) -> str:
-    """A code as typed (any case, spaces, missing dash) in its stored form, or ``StoreError``."""
-    cleaned = "".join(str(text).split()).upper().replace("_", "-")
-    if "-" not in cleaned and len(cleaned) == 2 + CODE_RANDOM_CHARS:
-        cleaned = f"{cleaned[:2]}-{cleaned[2:]}"
-    prefix, sep, rest = cleaned.partition("-")
-    if not (sep and len(prefix) == 2 and prefix.isalpha() and len(rest) == CODE_RANDOM_CHARS
-            and all(c in CODE_ALPHABET for c in rest)):
+    """A code as typed (any case, spaces, dashes or none) in its stored form, or ``StoreError``."""
+    compact = "".join(str(text).split()).upper().replace("_", "").replace("-", "")
+    prefix, rest = compact[:2], compact[2:]
+    if not (len(prefix) == 2 and prefix.isascii() and prefix.isalpha()
+            and len(rest) in (CODE_RANDOM_CHARS, OLD_CODE_RANDOM_CHARS) and all(c in CODE_ALPHABET for c in rest)):
         shown = str(text).strip()[:40]
-        raise StoreError(f"{shown!r} is not an experiment code: expected two letters, a dash and "
-                         f"{CODE_RANDOM_CHARS} characters, e.g. KN-7Q3M")
-    return cleaned
+        raise StoreError(f"{shown!r} is not an experiment code: expected two letters and {CODE_RANDOM_CHARS} "
+                         f"characters, e.g. KN-7Q3M-X9TA-HPRW (older codes: KN-7Q3M)")
+    return grouped(prefix, rest)
 
 
 class Store:
@@ -239,8 +247,8 @@ class Store:
         with self._using(write=True) as db:
             sha = self._put_recording(recording)
             for _ in range(100):
-                code = f"{code_prefix(exercise)}-" + "".join(
-                    secrets.choice(CODE_ALPHABET) for _ in range(CODE_RANDOM_CHARS))
+                code = grouped(code_prefix(exercise),
+                               "".join(secrets.choice(CODE_ALPHABET) for _ in range(CODE_RANDOM_CHARS)))
                 try:
                     db.execute(
                         "INSERT INTO experiments VALUES (?, ?, ?, ?, ?, ?, ?, ?)",

@@ -147,6 +147,11 @@ class Traffic:
         request = getattr(connection, "request", None)
         return None if request is None else request.headers
 
+    def peer(self, client_id: int) -> str | None:
+        """The address a connected client's websocket comes from (None once it is gone)."""
+        address = getattr(self._connections().get(client_id), "remote_address", None)
+        return str(address[0]) if address else None
+
     def close(self, client_id: int, reason: str) -> None:
         """Close a client's websocket (policy violation) from any thread or the event loop."""
         connection = self._connections().get(client_id)

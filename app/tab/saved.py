@@ -7,10 +7,12 @@ after ``RETRY_AFTER_S`` (growing while it keeps failing); the server log has it 
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 
-from app.infra.store import Store, StoreError
+from app.infra.access import TAB_CODE_TRIES_BURST, TAB_CODE_TRIES_PER_MINUTE, Throttle
+from app.infra.store import Store, StoreError, StoreUnavailable
 from app.panels.text import escaped
 from app.tab.worker import TabWorker
 
@@ -25,11 +27,14 @@ class SavedExperiments:
     """Autosave, Save and Open for one tab (``store`` None: the lab runs without a store)."""
 
     def __init__(self, store: Store | None, client, gui_lock, snapshot: Callable[[], tuple], worker: TabWorker,
-                 warn: Callable[[str], None]):
+                 warn: Callable[[str], None], code_tries: Throttle | None = None, address: str = "unknown"):
         """``snapshot()`` gives (exercise name, values, recording name, recording bytes); ``warn(markdown)``
-        shows a line in the tab's error line (a failed autosave)."""
+        shows a line in the tab's error line (a failed autosave); ``code_tries`` counts the codes
+        that open nothing per client ``address``, across tabs (this tab has an allowance of its own)."""
         self.store, self.client, self.gui_lock = store, client, gui_lock
         self.snapshot, self.worker, self.warn = snapshot, worker, warn
+        self.code_tries, self.address = code_tries, address
+        self.tab_code_tries = Throttle("experiment codes", TAB_CODE_TRIES_BURST, TAB_CODE_TRIES_PER_MINUTE, log=False)
         self.autosave_code: str | None = None
         self.autosave_due: float | None = None    # perf_counter time of the next autosave
         self.unsaved_since: float | None = None   # perf_counter time of the first change not yet autosaved
@@ -61,7 +66,7 @@ class SavedExperiments:
             return
         with gui.add_folder("Saved experiment", expand_by_default=False):
             self.autosave_note = gui.add_markdown("")
-            code = gui.add_text("Experiment code", "", hint="A code such as KN-7Q3M from Save (any tab, "
+            code = gui.add_text("Experiment code", "", hint="A code such as KN-7Q3M-X9TA-HPRW from Save (any tab, "
                                                              "any day) or from your instructor.")
             actions = gui.add_button_group("Experiment", ("Save", "Open"))
             actions.on_click(on("experiment", lambda: self.save() if actions.value == "Save"
@@ -114,10 +119,23 @@ class SavedExperiments:
                                    "(also after a restart) and press *Open*.")
 
     def open(self, text: str, exercises: dict, switch: Callable[..., None]) -> None:
-        """Open the experiment saved as ``text``: ``switch(exercise, parameters, recording)``."""
+        """Open the experiment saved as ``text``: ``switch(exercise, parameters, recording)``.  Codes
+        that open nothing are counted for this tab and its address: beyond their allowance, Open
+        waits (so that guessing codes is hopeless)."""
+        throttles = [(self.tab_code_tries, "tab")] + ([(self.code_tries, self.address)] if self.code_tries else [])
+        wait_s = max(throttle.wait_s(key) for throttle, key in throttles)
+        if wait_s > 0:
+            self.saved_note.content = (f"⚠️ Too many codes that open nothing: try again in {math.ceil(wait_s)} s "
+                                       "(check the code, or ask your instructor).")
+            return
         try:
             saved = self.store.load(text)
-        except StoreError as error:
+        except StoreUnavailable as error:
+            self.saved_note.content = f"⚠️ Not opened: {escaped(error)}"
+            return
+        except StoreError as error:               # no such code (or not a code): one try spent
+            for throttle, key in throttles:
+                throttle.failed(key)
             self.saved_note.content = f"⚠️ Not opened: {escaped(error)}"
             return
         exercise = exercises.get(saved.exercise)

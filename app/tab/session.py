@@ -33,7 +33,7 @@ from collections.abc import Callable
 import viser
 
 from app.infra import layout
-from app.infra.access import Admission
+from app.infra.access import Limits
 from app.infra.store import Store
 from app.panels import entry, scope, worksheets
 from app.panels.actions import ActionPanel
@@ -66,13 +66,14 @@ class LabSession:
 
     def __init__(self, client: viser.ClientHandle, exercise: Exercise, store: Store | None = None,
                  token: str | None = None, on_refused: Callable[[str], None] | None = None,
-                 admission: Admission | None = None):
+                 limits: Limits | None = None, address: str = "unknown"):
         """Cheap: the lab is built on the tab's worker thread (after the class token, if one is set,
-        and once ``admission`` has a place for it)."""
+        and once ``limits.admission`` has a place for it); ``address``: where the tab comes from."""
         self.client = client
         self.exercises = registry()
         self.token = token
-        self.admission = admission
+        self.limits, self.address = limits, address
+        self.admission = limits.admission if limits is not None else None
         self.on_refused = on_refused or (lambda _reason: None)   # disconnects the tab (too many wrong tokens)
         self.gui_lock = threading.RLock()         # writes to the GUI handles; held while the GUI is rebuilt
         self.generations = itertools.count()
@@ -80,7 +81,7 @@ class LabSession:
         self.worker = TabWorker(f"tab-{client.client_id}")
         self.state = LabState()
         self.saved = SavedExperiments(store, client, self.gui_lock, self.state.snapshot, self.worker,
-                                      self._show_error)
+                                      self._show_error, limits.code_tries if limits is not None else None, address)
         self.controls = Controls(self.worker, self.state, self.gui_lock, self._apply)
         self.worker.before_event = self.controls.flush_typing
         self.analysis = AnalysisView(client, self.gui_lock, self.state, self.worker, self._current)
@@ -115,8 +116,8 @@ class LabSession:
                 if self.token is None:
                     self._start_restored(exercise)
                 else:
-                    self.gate = TokenGate(self.client.gui, self.token, self.worker,
-                                          lambda: self._enter(exercise), self.on_refused)
+                    self.gate = TokenGate(self.client.gui, self.token, self.worker, lambda: self._enter(exercise),
+                                          self.on_refused, self.limits and self.limits.token_tries, self.address)
             while (events := self.worker.next_events(lambda: self.saved.autosave_due)) is not None:
                 spent = time.thread_time()
                 for action in events:
