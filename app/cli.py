@@ -103,7 +103,7 @@ def _parser() -> argparse.ArgumentParser:
     save.add_argument("--data-dir", default=None, metavar="DIR", help="where saved experiments live")
     bench = sub.add_parser("bench", help="closed-loop throughput benchmark")
     bench.add_argument("--json", action="store_true", help="print JSON")
-    bench.add_argument("--seconds", type=float, default=2.0, help="simulated seconds per measurement")
+    bench.add_argument("--seconds", default="2.0", help="simulated seconds per measurement (0.1 ... 60)")
     bench.add_argument("--browser", action="store_true",
                        help="instead: slider-to-readout latency in headless Chromium (needs the test extras)")
     reproduce = sub.add_parser(
@@ -159,8 +159,9 @@ def main(argv: list[str] | None = None) -> int:
             from app.hall import check_port, haproxy_config, parse_backend
             backends = [parse_backend(b) for b in args.backend]
             print(haproxy_config(args.bind_host, check_port(args.bind_port), backends,
-                                 note="\n# Start the lab on every backend with the same --token; "
-                                      "run: haproxy -f THIS_FILE"), end="")
+                                 note="\n# Start the lab on every backend with the same token (--token-file), "
+                                      "--allow-origin http://THIS_BALANCER and --trusted-proxy THIS_BALANCER;"
+                                      "\n# run: haproxy -f THIS_FILE"), end="")
             return 0
         if args.command == "bench" and args.clients is not None:
             from app.commands.load_bench import main as load_bench_main
@@ -169,7 +170,7 @@ def main(argv: list[str] | None = None) -> int:
                                    args.slider_every)
         if args.command == "bench":
             from app.commands.bench import main as bench_main
-            return bench_main(args.seconds, args.json)
+            return bench_main(headless.bench_seconds(args.seconds), args.json)
     except ParameterError as error:
         print(f"error: {error}", file=sys.stderr)
         return USAGE_ERROR

@@ -34,7 +34,7 @@ import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
 
-from app.infra.access import TOKEN_VARIABLE, check_bindable
+from app.infra.access import TOKEN_VARIABLE, check_bindable, is_address
 from lab_modules.parameters import ParameterError
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -154,6 +154,8 @@ class Worker:
     started: float = 0.0
     crashes: int = 0                   # quick successive exits, for the restart delay
     restart_at: float | None = None
+    exited_at: float | None = None     # set from an exit until the restarted process answers
+    start_s: float | None = None       # how long its last start took until it answered [s]
 
     def start(self) -> None:
         self.process = subprocess.Popen(self.command, cwd=ROOT, env=self.environment, stdin=subprocess.DEVNULL,
@@ -175,7 +177,8 @@ def worker_command(port: int, settings, allow_origins: list[str]) -> list[str]:
         command += ["--trusted-proxy", proxy]
     if settings.data_dir is not None:                 # one saved-experiments database for all workers
         command += ["--data-dir", str(settings.data_dir)]
-    for origin in allow_origins:
+    served = [] if is_address(settings.host) else [f"http://{settings.host}:{settings.port}"]   # the hall's name
+    for origin in [*allow_origins, *served]:
         command += ["--allow-origin", origin]
     return command
 
@@ -266,6 +269,7 @@ def serve_hall(settings, workers: int, first_worker_port: int | None, allow_orig
                               file=sys.stderr)
                         return 1
                     time.sleep(0.3)
+                worker.start_s = time.monotonic() - worker.started
             proxy = subprocess.Popen([haproxy, "-db", "-f", str(config)], stdin=subprocess.DEVNULL,
                                      start_new_session=True, preexec_fn=_die_with_parent)  # noqa: PLW1509
             time.sleep(0.5)
@@ -281,7 +285,7 @@ def serve_hall(settings, workers: int, first_worker_port: int | None, allow_orig
                 if proxy.poll() is not None:
                     print(f"error: HAProxy exited (status {proxy.returncode}); stopping", file=sys.stderr)
                     return 1
-                _supervise(pool)
+                supervise(pool)
         except _Stop:
             return 0
         finally:
@@ -292,8 +296,9 @@ def serve_hall(settings, workers: int, first_worker_port: int | None, allow_orig
                 signal.signal(s, handler)
 
 
-def _supervise(pool: list[Worker]) -> None:
-    """Restart exited workers (after a delay that grows while they keep crashing)."""
+def supervise(pool: list[Worker]) -> None:
+    """Restart exited workers (after a delay that grows while they keep crashing), saying when
+    they will answer again (the delay plus what their last start took) and when they do."""
     now = time.monotonic()
     for worker in pool:
         if worker.restart_at is not None:
@@ -302,12 +307,20 @@ def _supervise(pool: list[Worker]) -> None:
             continue
         status = worker.process.poll()
         if status is None:
+            if worker.exited_at is not None and _ready(worker.url):
+                worker.start_s = time.monotonic() - worker.started
+                print(f"lab process {worker.index} (port {worker.port}) answers again, "
+                      f"{time.monotonic() - worker.exited_at:.0f} s after it exited", file=sys.stderr, flush=True)
+                worker.exited_at = None
             continue
         worker.crashes = 0 if now - worker.started > STABLE_AFTER_S else worker.crashes + 1
         delay = RESTART_DELAYS_S[min(worker.crashes, len(RESTART_DELAYS_S)) - 1] if worker.crashes else 0.0
-        print(f"lab process {worker.index} (port {worker.port}) exited with status {status}; "
-              f"restarting{f' in {delay:.0f} s' if delay else ''} (HAProxy routes new tabs to the others)",
+        back = (f"; it answers again in about {delay + worker.start_s:.0f} s (its last start took "
+                f"{worker.start_s:.0f} s)") if worker.start_s is not None else ""
+        print(f"lab process {worker.index} (port {worker.port}) exited with status {status}; restarting "
+              f"{f'in {delay:.0f} s' if delay else 'now'}{back}; HAProxy routes new tabs to the others",
               file=sys.stderr, flush=True)
+        worker.exited_at = worker.exited_at or now
         worker.restart_at = now + delay
         if not delay:
             worker.start()

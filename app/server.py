@@ -58,7 +58,7 @@ class Settings:
             token, source = access.new_token(), "generated"
         return cls(host=host, port=port, exercise=args.exercise,
                    data_dir=Path(args.data_dir) if args.data_dir else None, token=token,
-                   token_source=source, origins=access.OriginPolicy(args.allow_origin or ()),
+                   token_source=source, origins=access.OriginPolicy(args.allow_origin or (), host),
                    max_tabs=access.check_max_tabs(args.max_tabs),
                    trusted_proxies=frozenset(access.check_host(a) for a in args.trusted_proxy or ()))
 
@@ -149,6 +149,7 @@ def serve(settings: Settings) -> int:
     chosen = get(settings.exercise)
     chosen.simulation(chosen.resolve({})).advance(1)       # compile the loop before the first tab
     _limit_malloc_arenas()
+    traffic.prepare()                                      # before the server accepts a connection
     server = viser.ViserServer(host=settings.host, port=settings.port, label="AMB estimation lab", verbose=False)
     if server.get_port() != settings.port:                 # taken between the check and the start
         server.stop()
@@ -169,8 +170,6 @@ def serve(settings: Settings) -> int:
             session = sessions.get(client_id)
         if session is not None:
             session.report(text)
-
-    policy = traffic.install(server, report)
 
     # Both callbacks are async: they run on the event loop, in order, so a tab that closes
     # while its lab is still being built is always found and stopped (its worker builds it).
@@ -199,6 +198,10 @@ def serve(settings: Settings) -> int:
         if session is not None:
             session.close()
         closed_tabs.set()
+
+    # Last: a tab's messages wait for the policy (``traffic.prepare``), so every tab, also one that
+    # connected while the server was being set up, meets it and the callbacks above.
+    policy = traffic.install(server, report)
 
     url = shown_url(settings.host, server.get_port())
     print(f"AMB estimation lab: open {url} in a browser (Ctrl+C to stop)", flush=True)

@@ -12,10 +12,11 @@ import subprocess
 import sys
 import time
 
+import msgspec
 import pytest
 
 from tests.test_store_access import damaged_database
-from tests.wsclient import REPO, RawTab, lab_process, run_async
+from tests.wsclient import CAMERA, REPO, RawTab, lab_process, run_async
 
 pytestmark = pytest.mark.classroom
 
@@ -350,3 +351,59 @@ def test_the_hall_keeps_the_token_off_every_command_line(tmp_path):
         del os.environ[TOKEN_VARIABLE]
     assert len(command_lines) >= 4 and not any(token.encode() in line for line in command_lines)
     assert built
+
+
+def test_a_tab_may_change_only_what_a_browser_changes(tmp_path):
+    """A control's internal attributes (its callbacks, ``removed``) and an Exercise that does not
+    exist are refused with one line in the tab and one in the log; the controls keep working."""
+    port = 8468
+    log = tmp_path / "server.log"
+    with lab_process(port, data_dir=tmp_path, log=log):
+        async def scenario():
+            tab = await _lab_tab(port)
+            slider = tab.find("GuiSliderMessage", NOISE)
+            chooser = tab.find("GuiDropdownMessage", "Exercise")
+            for updates in ({"update_cb": []}, {"removed": True}, {"value": 1.2, "sync_cb": None}):
+                await tab.send({"type": "GuiUpdateMessage", "uuid": slider, "updates": updates})
+            for _ in range(3):
+                await tab.set_value(chooser, "No such exercise")
+            await asyncio.sleep(0.5)
+            shown = await tab.wait_for(lambda: _markdown(tab, "could not use"), 20)
+            readouts = tab.find_containing("GuiMarkdownMessage", READOUTS)
+            before = _markdown(tab, READOUTS)
+            await tab.set_value(slider, 1.7)
+            answered = await tab.wait_for(lambda: _markdown(tab, READOUTS) != before, 30)
+            heading = tab.find_containing("GuiMarkdownMessage", "### Kalman filter")
+            await tab.close()
+            return shown, bool(readouts) and answered, heading
+        shown, answered, heading = run_async(scenario())
+    text = log.read_text()
+    assert shown and answered and heading, text[-3000:]
+    assert text.count("invalid message") == 1 and "Traceback" not in text and "That did not work" not in text
+
+
+def test_a_dns_rebinding_request_is_refused(tmp_path):
+    """A page served as evil.example whose name now points at the lab: Host and Origin both say
+    evil.example (they agree), but the lab does not serve that name."""
+    import socket
+
+    import viser
+    import websockets
+    port = 8469
+    with lab_process(port, data_dir=tmp_path, log=tmp_path / "server.log"):
+        async def scenario():
+            sock = socket.create_connection(("127.0.0.1", port))
+            connection = await websockets.connect(f"ws://evil.example:{port}", sock=sock,
+                                                  subprotocols=[f"viser-v{viser.__version__}"],
+                                                  additional_headers={"Origin": f"http://evil.example:{port}"})
+            await connection.send(msgspec.msgpack.encode(CAMERA))   # viser opens a tab on its first camera message
+            try:
+                await asyncio.wait_for(connection.wait_closed(), 60)
+            finally:
+                await connection.close()
+            own = await RawTab().connect(url(port), origin=url(port))
+            built = await own.wait_for(lambda: own.find("GuiUplotMessage", SCOPE), 120)
+            await own.close()
+            return connection.close_code, built
+        code, built = run_async(scenario())
+    assert code == 1008 and built

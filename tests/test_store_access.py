@@ -89,7 +89,7 @@ def test_token_and_origin():
     token = new_token()
     assert token_matches(token, f"  {token.upper()} ") and not token_matches(token, token + "x")
     assert not token_matches(token, None)
-    policy = OriginPolicy(["https://lab.example.org"])
+    policy = OriginPolicy(["https://lab.example.org"], served_host="10.0.0.5")    # the lab serves 10.0.0.5
     assert policy.permits("http://10.0.0.5:8080", "10.0.0.5:8080")
     assert policy.permits("https://lab.example.org", "10.0.0.5:8080")
     assert policy.permits(None, "10.0.0.5:8080")                     # not a browser: the token decides
@@ -267,3 +267,18 @@ def test_old_short_codes_keep_opening(tmp_path):
                    "NULL, 0, 0)")
     assert store.load("kn 7q3m").parameters == {"seed": 4} and normalise_code("KN7Q3M") == "KN-7Q3M"
     assert normalise_code("kn7q3mx9tahprw") == "KN-7Q3M-X9TA-HPRW"
+
+
+def test_host_must_be_a_name_the_lab_serves():
+    """DNS rebinding: a page at evil.example whose name was re-pointed at the lab sends Host and
+    Origin evil.example; both agree, but the lab does not serve that name."""
+    import socket
+    policy = OriginPolicy(["https://lab.example.org"], served_host="0.0.0.0")
+    assert not policy.permits("http://evil.example:8080", "evil.example:8080")
+    assert not policy.permits("http://10.255.255.7:8080", "10.255.255.7:8080")   # not this machine
+    for host in ("127.0.0.1", "localhost", "[::1]", socket.gethostname()):
+        assert policy.permits(f"http://{host}:8080", f"{host}:8080"), host
+    assert policy.permits("https://lab.example.org", "lab.example.org")           # allowed explicitly
+    named = OriginPolicy([], served_host="lab.school.example")
+    assert named.permits("http://lab.school.example:8080", "lab.school.example:8080")
+    assert not named.serves("other.example") and not named.serves("[bad")

@@ -16,7 +16,11 @@ and how many tabs one process gives a lab.
   HAProxy adds when the peer is a trusted proxy (loopback, ``--trusted-proxy``).
 - A websocket's ``Origin`` header (sent by every browser) must name the host
   the tab asked for (the ``Host`` header), or one of the allowed origins:
-  another web page a student visits cannot open sessions on the lab.
+  another web page a student visits cannot open sessions on the lab.  That
+  ``Host`` must be a name the lab serves (an address of this machine, a
+  loopback name, the machine's name, ``--host``, an ``--allow-origin`` host):
+  a page whose own name an attacker re-pointed at the lab (DNS rebinding) sends
+  ``Host`` and ``Origin`` of that name, and is refused.
   Clients without an Origin (not a browser) are let through: the token is
   what keeps them out.
 - ``Admission``: at most ``--max-tabs`` tabs of one process have a lab; a tab
@@ -27,6 +31,7 @@ from __future__ import annotations
 
 import collections
 import errno
+import functools
 import hmac
 import ipaddress
 import math
@@ -127,6 +132,15 @@ def check_bindable(host: str, port: int) -> None:
             raise ParameterError(f"cannot serve on {host}:{port}: {error.strerror}") from None
 
 
+def is_address(host: str) -> bool:
+    """Whether ``host`` is an IP address (not a name)."""
+    try:
+        ipaddress.ip_address(host.strip())
+    except ValueError:
+        return False
+    return True
+
+
 def is_loopback(host: str) -> bool:
     """Whether ``host`` reaches only this machine (127.0.0.0/8, ::1, localhost)."""
     if host.strip().lower() in LOOPBACK_NAMES:
@@ -203,10 +217,11 @@ def _origin_key(origin: str) -> str | None:
 
 class OriginPolicy:
     """Which browser pages may open a websocket to the lab: the page the lab
-    itself served (Origin host equals the request's Host header) and the
-    origins in ``allowed`` (e.g. ``https://lab.example.org`` behind a proxy)."""
+    itself served (Origin host equals the request's Host header, and that is a
+    name the lab serves) and the origins in ``allowed`` (e.g.
+    ``https://lab.example.org`` behind a proxy)."""
 
-    def __init__(self, allowed: tuple[str, ...] | list[str] = ()):
+    def __init__(self, allowed: tuple[str, ...] | list[str] = (), served_host: str = "127.0.0.1"):
         self.allowed = set()
         for origin in allowed:
             key = _origin_key(origin)
@@ -214,6 +229,16 @@ class OriginPolicy:
                 raise ParameterError(f"--allow-origin={origin!r} is not an origin: expected e.g. "
                                      "http://lab.example.org:8080")
             self.allowed.add(key)
+        self.names = {*LOOPBACK_NAMES, served_host.strip().lower(), socket.gethostname().lower(),
+                      socket.getfqdn().lower(), *(urlsplit(key).hostname for key in self.allowed)}
+
+    def serves(self, host_header: str) -> bool:
+        """Whether a request's ``Host`` names this lab: an address of this machine or one of ``names``."""
+        try:
+            host = urlsplit(f"//{host_header.strip()}").hostname
+        except ValueError:
+            return False
+        return bool(host) and (host in self.names or _is_local_address(host))
 
     def permits(self, origin: str | None, host_header: str | None) -> bool:
         """Whether a websocket with these ``Origin`` and ``Host`` headers may connect."""
@@ -224,7 +249,7 @@ class OriginPolicy:
             return False                                  # "null" (sandboxed or file:// pages)
         if key in self.allowed:
             return True
-        if not host_header:
+        if not host_header or not self.serves(host_header):
             return False
         scheme = key.split("://", 1)[0]
         return _origin_key(f"{scheme}://{host_header}") == key
@@ -336,6 +361,21 @@ def client_address(peer: str | None, forwarded_for: str | None, trusted_proxies:
     if forwarded_for and trusted:
         return forwarded_for.split(",")[-1].strip() or peer
     return peer
+
+
+@functools.lru_cache(maxsize=256)
+def _is_local_address(host: str) -> bool:
+    """Whether ``host`` is an IP address of this machine (one a socket can be bound to)."""
+    try:
+        family = socket.AF_INET6 if ipaddress.ip_address(host).version == 6 else socket.AF_INET
+    except ValueError:
+        return False                                       # a name
+    with socket.socket(family, socket.SOCK_DGRAM) as probe:
+        try:
+            probe.bind((host, 0))
+        except OSError:
+            return False
+    return True
 
 
 def _is_loopback_ip(address: str) -> bool:

@@ -15,7 +15,10 @@ and hands every one to its handlers (GUI updates become thread-pool jobs).
   process may declare at most ``UPLOAD_BUDGET_BYTES``, and one that sends no part for
   ``UPLOAD_STALE_S`` is dropped (its parts are freed);
 - **answers invalid messages** (undecodable, or rejected by a handler) in the
-  tab through ``Traffic.report`` and logs one line per client, not per message.
+  tab through ``Traffic.report`` and logs one line per client, not per message;
+  a GUI update may only change a control's ``value`` (what a browser sends: a
+  tab could otherwise set a control's internal attributes, such as its
+  callbacks), and a dropdown's value must be one of its options.
 
 The origin check needs the websocket's request headers: ``headers`` finds
 them by client id.
@@ -168,6 +171,20 @@ class Traffic:
         else:
             asyncio.run_coroutine_threadsafe(coroutine, loop)
 
+    # -- GUI updates --------------------------------------------------------------------
+    def refused_update(self, client_id: int | None, message) -> str | None:
+        """Why a tab's GUI update is refused (None: pass it on): only a control's value, and for a
+        dropdown one of its options."""
+        if not isinstance(message.updates, dict):
+            return "malformed GUI update"
+        if set(message.updates) != {"value"}:
+            return "a change of a control the browser never sends"
+        client = self.server._connected_clients.get(client_id)
+        handle = getattr(client, "gui", self.server.gui)._gui_input_handle_from_uuid.get(message.uuid)
+        if isinstance(handle, viser.GuiDropdownHandle) and message.updates["value"] not in handle.options:
+            return "a choice the control does not offer"
+        return None
+
     # -- uploads ----------------------------------------------------------------------
     def free_uploads(self, keys) -> None:
         """Forget unfinished uploads and free the parts viser holds of them (on the event loop)."""
@@ -211,16 +228,24 @@ class Traffic:
 
 
 _installed: Traffic | None = None
-_original_consumer = infra._message_consumer
 _original_dispatch = infra.WebsockMessageHandler._handle_incoming_message
+#: How often a connection made before ``install`` looks whether the policy is there [s].
+INSTALL_POLL_S = 0.01
+
+
+def prepare() -> None:
+    """Put the reader in front of viser's handlers before the server is made: viser serves as soon
+    as it is made, and a tab that connects in that moment (a class reconnecting to a restarted
+    process) waits for ``install`` instead of passing the policy by."""
+    infra._message_consumer = _consumer
+    infra.WebsockMessageHandler._handle_incoming_message = _guarded_dispatch
 
 
 def install(server: viser.ViserServer, report: Callable[[int, str], None]) -> Traffic:
-    """Put the per-tab policy in front of ``server``'s handlers (one server per process)."""
+    """The per-tab policy for ``server`` (one server per process; ``prepare`` first)."""
     global _installed
+    prepare()
     _installed = Traffic(server, report)
-    infra._message_consumer = _consumer
-    infra.WebsockMessageHandler._handle_incoming_message = _guarded_dispatch
     return _installed
 
 
@@ -252,10 +277,9 @@ _COALESCED = {"GuiUpdateMessage", "ViewerCameraMessage"}
 async def _consumer(websocket, handle_message: Callable, message_class) -> None:
     """viser's message reader with coalescing, upload limits, reports and a share of the
     event loop per connection (see the module docstring)."""
+    while _installed is None:                     # connected while the server was being set up
+        await asyncio.sleep(INSTALL_POLL_S)
     traffic = _installed
-    if traffic is None:
-        await _original_consumer(websocket, handle_message, message_class)
-        return
     loop = asyncio.get_running_loop()
     client_id: int | None = None
     pending: dict[str, bytes] = {}                # control uuid (or "camera") -> newest raw update
@@ -277,8 +301,8 @@ async def _consumer(websocket, handle_message: Callable, message_class) -> None:
             return
         last_sent[key] = loop.time()
         message = decode(raw)
-        if isinstance(message, _messages.GuiUpdateMessage) and not isinstance(message.updates, dict):
-            traffic.invalid(client_id, "malformed GUI update")
+        if isinstance(message, _messages.GuiUpdateMessage) and (problem := traffic.refused_update(client_id, message)):
+            traffic.invalid(client_id, problem)
         elif message is not None:
             traffic.stats["dispatched_updates"] += 1
             handle_message(message)

@@ -213,8 +213,8 @@ class LabSession:
             self._start(exercise, overrides, recording)
 
     def _choose(self, title: str) -> None:
-        chosen = next(e for e in self.exercises.values() if e.title == title)
-        if chosen is not self.state.exercise:
+        chosen = next((e for e in self.exercises.values() if e.title == title), None)
+        if chosen is not None and chosen is not self.state.exercise:   # the traffic refuses unknown titles
             self._switch(chosen)
 
     def _current(self, generation: int) -> bool:

@@ -196,6 +196,7 @@ class ThrustLiftoff(Exercise):
     worksheet = "thrust_liftoff.md"
     parameters = PARAMETERS
     default_duration_s = 2.0
+    min_duration_s = 0.3             # the lift-off settles within about 0.21 s (its settling-time metric)
     charts = (
         Chart("Lift-off: collar position", "µm", (
             Series("measured z", "x_measured_m", 1e6, "#b0b0b0"),
