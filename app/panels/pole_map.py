@@ -32,6 +32,7 @@ import viser
 from app.panels import scope
 from lab_modules import analysis
 from lab_modules.exercises import Exercise
+from lab_modules.formatting import number
 
 LIGHT_DAMPING = 0.3               # poles below this damping always belong to the dominant view
 LOCUS_POINTS = 48                 # factor values per root locus (geometric over the parameter's range)
@@ -134,8 +135,8 @@ class Mode:
         return f"{self.name} (unstable)" if self.pole.real > 0 and "unstable" not in self.name else self.name
 
 
-def _duration(seconds: float) -> str:
-    return f"{seconds * 1e3:.3g} ms" if seconds < 1 else f"{seconds:.3g} s"
+def _duration(seconds: float, digits: int = 3) -> str:
+    return f"{number(seconds * 1e3, digits)} ms" if seconds < 1 else f"{number(seconds, digits)} s"
 
 
 def modes(poles: dict[str, np.ndarray], names: dict[str, list] | None = None,
@@ -159,6 +160,12 @@ def modes(poles: dict[str, np.ndarray], names: dict[str, list] | None = None,
     return [Mode(k + 1, set_name, p, name, part) for k, (set_name, p, name, part) in enumerate(found)]
 
 
+def _pole(mode: Mode, digits: int = 3) -> str:
+    """s of a mode as text: "-12.5" or "-3 ± 4j"."""
+    real = number(mode.pole.real, digits)
+    return real if mode.is_real else f"{real} ± {number(mode.pole.imag, digits)}j"
+
+
 def table_markdown(pole_view: PoleView | dict) -> str:
     """The pole table: every mode with its number, set, name (or kind), f_n, ζ and s."""
     if isinstance(pole_view, dict):
@@ -166,8 +173,8 @@ def table_markdown(pole_view: PoleView | dict) -> str:
     rows = ["| # | set | mode | f_n [Hz] | ζ | s [rad/s] |", "|---:|---|---|---:|---:|---|"]
     for m in modes(pole_view.poles, pole_view.names, pole_view.shares):
         dot = f'<span style="color:{category(m.set_name).color}">●</span>'
-        s = f"{m.pole.real:.0f}" if m.is_real else f"{m.pole.real:.0f} ± {m.pole.imag:.0f}j"
-        rows.append(f"| {m.number} | {dot} {m.set_name} | {m.label} | {m.natural_hz:.3g} | {m.damping:.2f} | {s} |")
+        rows.append(f"| {m.number} | {dot} {m.set_name} | {m.label} | {number(m.natural_hz)} "
+                    f"| {number(m.damping)} | {_pole(m)} |")
     return "\n".join(rows)
 
 
@@ -434,11 +441,12 @@ def pole_map(poles: dict[str, np.ndarray], title: str, shown: list[Mode] | None 
 
 # -- "Show mode": one mode ringed on the maps, with its name and state participation ------------
 NO_MODE = "(none)"
+DETAIL_DIGITS = 4                 # the chosen mode: one digit more than the table
 
 
 def mode_choice(mode: Mode) -> str:
     """The "Show mode" dropdown's text of a mode."""
-    return f"#{mode.number} {mode.label} ({mode.natural_hz:.3g} Hz)"
+    return f"#{mode.number} {mode.label} ({number(mode.natural_hz)} Hz)"
 
 
 def mode_choices(pole_view: PoleView) -> tuple[str, ...]:
@@ -468,12 +476,12 @@ def detail_markdown(mode: Mode | None) -> str:
     if mode is None:
         return ("*Pick a mode in “Show mode” to ring it on both maps (orange) and read its name, "
                 "frequency, damping and which states take part in it.*")
-    s = f"{mode.pole.real:.4g}" if mode.is_real else f"{mode.pole.real:.4g} ± {mode.pole.imag:.4g}j"
-    decay = f"{_duration(-1.0 / mode.pole.real)}" if mode.pole.real < 0 else "— (not decaying)"
+    decay = _duration(-1.0 / mode.pole.real, DETAIL_DIGITS) if mode.pole.real < 0 else "— (not decaying)"
     lines = [(f"**Mode #{mode.number}: {mode.label}** "
              f'(<span style="color:{category(mode.set_name).color}">●</span> {mode.set_name})'), "",
              "| s [rad/s] | f_n [Hz] | ζ | time constant τ = −1/Re s |", "|---|---:|---:|---:|",
-             f"| {s} | {mode.natural_hz:.4g} | {mode.damping:.3f} | {decay} |"]
+             (f"| {_pole(mode, DETAIL_DIGITS)} | {number(mode.natural_hz, DETAIL_DIGITS)} "
+              f"| {number(mode.damping, DETAIL_DIGITS)} | {decay} |")]
     shown = [(label, share) for label, share in mode.shares if share >= 0.01]
     if shown:
         lines += ["", "State participation (share of the mode; the name is the physics with the largest share):", "",
