@@ -143,7 +143,7 @@ def test_modes_number_every_real_pole_and_pair_with_frequency_and_damping():
     assert pair.natural_hz == pytest.approx(5 / (2 * np.pi)) and pair.kind == "oscillation"
     assert modes[0].kind.startswith("unstable") and modes[0].damping == -1.0
     table = pole_map.table_markdown(poles)
-    assert len(table.splitlines()) == 2 + 4 and "-3 ± 4j" in table and "0.60" in table
+    assert len(table.splitlines()) == 2 + 4 and "-3 ± 4j" in table and "| 0.6 |" in table
 
 
 def test_mode_labels_do_not_overlap():
