@@ -20,7 +20,7 @@ import viser
 from lab_modules.formatting import number, signed
 
 PREFIXES = ((1e9, "G"), (1e6, "M"), (1e3, "k"), (1.0, ""), (1e-3, "m"), (1e-6, "µ"), (1e-9, "n"), (1e-12, "p"))
-#: units an SI prefix can go in front of (others, and pure numbers, are shown in powers of ten)
+#: units an SI prefix can go in front of (others, and pure numbers, keep their unit)
 PREFIXABLE = ("m", "m/s", "A", "V", "N", "N/A", "N/m", "H", "s")
 DIGITS = 4                        # one more than a readout: a filter is debugged digit by digit
 RUNNING_NOTE = "*Pause the simulation (or press Step) to inspect the filter at one sample.*"
