@@ -135,8 +135,8 @@ class Mode:
         return f"{self.name} (unstable)" if self.pole.real > 0 and "unstable" not in self.name else self.name
 
 
-def _duration(seconds: float, digits: int = 3) -> str:
-    return f"{number(seconds * 1e3, digits)} ms" if seconds < 1 else f"{number(seconds, digits)} s"
+def _duration(seconds: float) -> str:
+    return f"{number(seconds * 1e3)} ms" if seconds < 1 else f"{number(seconds)} s"
 
 
 def modes(poles: dict[str, np.ndarray], names: dict[str, list] | None = None,
@@ -441,7 +441,7 @@ def pole_map(poles: dict[str, np.ndarray], title: str, shown: list[Mode] | None 
 
 # -- "Show mode": one mode ringed on the maps, with its name and state participation ------------
 NO_MODE = "(none)"
-DETAIL_DIGITS = 4                 # the chosen mode: one digit more than the table
+DETAIL_DIGITS = 4                 # s and f_n of the chosen mode: one digit more than the table
 
 
 def mode_choice(mode: Mode) -> str:
@@ -476,12 +476,12 @@ def detail_markdown(mode: Mode | None) -> str:
     if mode is None:
         return ("*Pick a mode in “Show mode” to ring it on both maps (orange) and read its name, "
                 "frequency, damping and which states take part in it.*")
-    decay = _duration(-1.0 / mode.pole.real, DETAIL_DIGITS) if mode.pole.real < 0 else "— (not decaying)"
+    decay = _duration(-1.0 / mode.pole.real) if mode.pole.real < 0 else "— (not decaying)"
     lines = [(f"**Mode #{mode.number}: {mode.label}** "
              f'(<span style="color:{category(mode.set_name).color}">●</span> {mode.set_name})'), "",
              "| s [rad/s] | f_n [Hz] | ζ | time constant τ = −1/Re s |", "|---|---:|---:|---:|",
              (f"| {_pole(mode, DETAIL_DIGITS)} | {number(mode.natural_hz, DETAIL_DIGITS)} "
-              f"| {number(mode.damping, DETAIL_DIGITS)} | {decay} |")]
+              f"| {number(mode.damping)} | {decay} |")]
     shown = [(label, share) for label, share in mode.shares if share >= 0.01]
     if shown:
         lines += ["", "State participation (share of the mode; the name is the physics with the largest share):", "",
