@@ -1,5 +1,5 @@
 """The Pole map tab (issue 11, defects 3, 9 and 15, and the root locus), without a browser:
-every exercise's pole sets map onto the lab's four categories by a rule, each category
+every exercise declares which of the lab's four categories each of its pole sets is, each category
 keeps its colour in every exercise, both maps' ranges hold every pole they draw, the
 modes are numbered with their frequency and damping, and the root locus at the current
 factor is the closed loop the exercise reports."""
@@ -12,7 +12,7 @@ import scipy.linalg
 
 from app.panels import pole_map
 from lab_modules import analysis
-from lab_modules.exercises import Analysis, get, sensor_placement
+from lab_modules.exercises import Analysis, PoleCategory, get, sensor_placement
 from lab_modules.exercises.ekf_parameters import linear_axis, linear_poles
 from lab_modules.plants.radial_bearing import RIG
 from tests.example_exercise import contract_exercises
@@ -57,10 +57,37 @@ def test_categories_have_one_colour_each_and_a_legend():
 
 
 @pytest.mark.parametrize("name", EXERCISES)
-def test_every_pole_set_maps_onto_a_category_by_a_rule(defaults, name):
-    _, _, poles = defaults[name]
-    for set_name in poles:
-        assert pole_map.matched_rule(set_name) is not None, (name, set_name)
+def test_every_pole_set_has_a_declared_category(defaults, name):
+    """``Exercise.pole_categories``: the exercise declares the category of each set it reports,
+    and no set it does not report; the pole view draws each set in the declared category."""
+    exercise, values, poles = defaults[name]
+    declared = exercise.pole_categories(values)
+    assert set(declared) == set(poles), (name, set(poles) ^ set(declared))
+    assert all(isinstance(kind, PoleCategory) for kind in declared.values()), declared
+    pole_view = pole_map.view(exercise, values, poles)
+    assert {set_name: c.name for set_name, c in pole_view.categories.items()} == {
+        set_name: kind.value for set_name, kind in declared.items()}
+
+
+def test_a_set_named_after_the_values_is_declared_at_those_values():
+    """self_sensing names its coil poles after the gaps: moved gaps, the same declaration."""
+    exercise = get("self_sensing")
+    values = exercise.resolve({"gap_1_mm": 3.25, "gap_2_mm": 7.5})
+    poles = first_analysis(exercise, values).poles
+    assert set(exercise.pole_categories(values)) == set(poles) == {"coil −R/L at 3.25 mm", "coil −R/L at 7.5 mm"}
+
+
+def test_a_set_name_means_one_category_in_every_exercise():
+    """Each category has one colour in every exercise; so has each set name."""
+    seen: dict[str, tuple[str, PoleCategory]] = {}
+    for name, exercise in CONTRACT.items():
+        for set_name, kind in exercise.pole_categories(exercise.resolve()).items():
+            first = seen.setdefault(set_name, (name, kind))
+            assert first[1] == kind, (set_name, first, (name, kind))
+
+
+def test_categories_are_the_lab_pole_categories_in_order():
+    assert [c.name for c in pole_map.CATEGORIES] == [kind.value for kind in PoleCategory]
 
 
 @pytest.mark.parametrize("set_name, expected", [
