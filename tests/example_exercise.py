@@ -17,7 +17,7 @@ import scipy.linalg
 from lab_modules import analysis
 from lab_modules.claims import Claim
 from lab_modules.estimators.kalman import KalmanFilter
-from lab_modules.exercises import Analysis, Chart, Exercise, Series, registry
+from lab_modules.exercises import Analysis, Chart, Exercise, PoleCategory, Series, registry
 from lab_modules.parameters import Parameter
 
 T = 1e-3                                        # sample time [s]
@@ -118,6 +118,9 @@ class SpringExample(Exercise):
         poles = {"open-loop plant": analysis.z_to_s(np.linalg.eigvals(A), T),
                  "filter error": analysis.z_to_s(np.linalg.eigvals(A - A @ K @ C), T)}   # e⁺ ← (I − K C) A e⁺
         return Analysis(readouts, poles)
+
+    def pole_categories(self, values: dict) -> dict[str, PoleCategory]:
+        return {"open-loop plant": PoleCategory.PLANT, "filter error": PoleCategory.FILTER_ERROR}
 
     def simulation(self, values: dict) -> SpringSimulation:
         return SpringSimulation(values)

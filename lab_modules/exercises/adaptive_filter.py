@@ -36,7 +36,7 @@ import scipy.linalg
 from lab_modules import analysis
 from lab_modules.claims import Claim
 from lab_modules.estimators.scheduled_kalman import model_matrices, process_noise
-from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises import Analysis, Chart, Exercise, Plot, PoleCategory, Series
 from lab_modules.exercises._stiffness_networks import FBFNN_EPOCHS, FBFNN_RATE, NETWORK_DEFAULTS, networks
 from lab_modules.loops.axial_bearing_loop import (
     COLUMNS,
@@ -329,6 +329,9 @@ class AdaptiveFilter(Exercise):
                   ("F_St error [N]", "disturbance-force estimate error"),
                   ("x_M error [V]", "sensor-lag estimate error")]
         return {"filter error (centre model)": (A - A @ K @ H, states, T)}
+
+    def pole_categories(self, values: dict) -> dict[str, PoleCategory]:
+        return {"filter error (centre model)": PoleCategory.FILTER_ERROR}
 
     def analyse(self, values: dict):
         trace, status = run(values)

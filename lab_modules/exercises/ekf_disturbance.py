@@ -47,7 +47,7 @@ import numpy as np
 from lab_modules import analysis
 from lab_modules.claims import Claim
 from lab_modules.estimators import extended_kalman as ef
-from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises import Analysis, Chart, Exercise, Plot, PoleCategory, Series
 from lab_modules.exercises._common import (
     AXIS_ERROR_STATES,
     axis_mode_matrices,
@@ -339,6 +339,10 @@ class EkfDisturbance(Exercise):
         states = [*AXIS_ERROR_STATES, ("f_z error [N]", "disturbance-force estimate error")]
         return {**axis_mode_matrices(linear_axis(values), CLOSED_LOOP),
                 "filter error (at x = 0)": (filter_error_matrix(values), states, T)}
+
+    def pole_categories(self, values: dict) -> dict[str, PoleCategory]:
+        return {"open-loop plant": PoleCategory.PLANT, CLOSED_LOOP: PoleCategory.CLOSED_LOOP,
+                "filter error (at x = 0)": PoleCategory.FILTER_ERROR}
 
     def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
         """The open-loop plant's poles by name (the loops' poles keep their generic kind)."""

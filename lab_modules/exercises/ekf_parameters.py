@@ -38,7 +38,7 @@ import numpy as np
 from lab_modules import analysis
 from lab_modules.claims import Claim
 from lab_modules.estimators import extended_kalman as ef
-from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises import Analysis, Chart, Exercise, Plot, PoleCategory, Series
 from lab_modules.exercises._common import (
     axis_mode_matrices,
     axis_plant_names,
@@ -226,6 +226,11 @@ class EkfParameters(Exercise):
                  "true position and current; they move with the PRBS, the estimates cannot "
                  "(eq. 9 is linear).")]
         return Analysis(readouts, poles, notes, plots)
+
+    def pole_categories(self, values: dict) -> dict[str, PoleCategory]:
+        return {"open-loop plant": PoleCategory.PLANT,
+                "closed loop (linear, rated k_i, k_x)": PoleCategory.CLOSED_LOOP,
+                "filter error (x, v, i at rated k_i, k_x)": PoleCategory.FILTER_ERROR}
 
     def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
         """The open-loop plant's poles by name (the loops' poles keep their generic kind)."""

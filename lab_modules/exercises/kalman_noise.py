@@ -23,7 +23,7 @@ import numpy as np
 
 from lab_modules import analysis
 from lab_modules.claims import Claim
-from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises import Analysis, Chart, Exercise, Plot, PoleCategory, Series
 from lab_modules.exercises._common import axis_mode_matrices, axis_plant_names, pairs, pid_from_values
 from lab_modules.exercises._radial_axis_controls import (
     AMPLIFIER_NOISE_A,
@@ -204,6 +204,10 @@ class KalmanNoise(Exercise):
         axis = setup(values)
         return {f"{source} feedback": axis.with_changes(use_estimate=source == "estimated").loop_at_plant_input()
                 for source in ("measured", "estimated")}
+
+    def pole_categories(self, values: dict) -> dict[str, PoleCategory]:
+        return {"open-loop plant": PoleCategory.PLANT, "closed loop": PoleCategory.CLOSED_LOOP,
+                "filter error": PoleCategory.FILTER_ERROR}
 
     def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
         """The open-loop plant's poles by name (the loops' poles keep their generic kind)."""

@@ -43,7 +43,7 @@ import numpy as np
 
 from lab_modules.claims import Claim
 from lab_modules.controllers.lqr import PAPER_LQG, PAPER_LQR_WEIGHTS, gain_deviation, integral_augmented_model
-from lab_modules.exercises import Analysis, Chart, Exercise, Series
+from lab_modules.exercises import Analysis, Chart, Exercise, PoleCategory, Series
 from lab_modules.exercises._common import (
     AXIS_STATES,
     INTEGRAL_STATE,
@@ -275,6 +275,10 @@ class LqgVsPid(Exercise):
                 "regulator_states": ["x [m]", "v [m/s]", "i [A]", "xi = ∫(r - x) dt [m s]"],
                 "A_aug": A_aug.tolist(), "B_aug": B_aug.tolist(),
                 "state_gain_K": list(lqg.state_gain), "integral_gain_K_I_v_per_m_s": lqg.integral_gain_v_per_m_s}
+
+    def pole_categories(self, values: dict) -> dict[str, PoleCategory]:
+        return {"open-loop plant": PoleCategory.PLANT, "PID loop with filter": PoleCategory.CLOSED_LOOP,
+                "LQG regulator": PoleCategory.REGULATOR, "Kalman filter error": PoleCategory.FILTER_ERROR}
 
     def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
         """The open-loop plant's poles by name (the loops' poles keep their generic kind)."""

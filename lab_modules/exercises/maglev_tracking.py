@@ -29,7 +29,7 @@ from lab_modules.controllers.feedback_linearisation import (
     linearising_control,
 )
 from lab_modules.controllers.lead_lag import LEAD_LAG
-from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises import Analysis, Chart, Exercise, Plot, PoleCategory, Series
 from lab_modules.exercises._common import MAGLEV_LAGS, magnet_plant_names
 from lab_modules.loops.maglev_loop import (
     CONTROLLERS,
@@ -273,6 +273,11 @@ class MaglevTracking(Exercise):
                   ("x₃ coil current [A]", "coil current")]
         states += [(f"lead-lag state {k + 1} [V]", "lead-lag compensator") for k in range(loop.nstates - 3)]
         return {"lead-lag loop (linearised)": (np.asarray(loop.A), states, None)}
+
+    def pole_categories(self, values: dict) -> dict[str, PoleCategory]:
+        return {"open-loop plant (linearised, 14.8 mm)": PoleCategory.PLANT,
+                "feedback-linearised loop (eq. 2.29)": PoleCategory.CLOSED_LOOP,
+                "lead-lag loop (linearised)": PoleCategory.CLOSED_LOOP}
 
     def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
         """The linearised plant's poles by name (the loops' poles keep their generic kind)."""

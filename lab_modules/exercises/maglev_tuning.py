@@ -30,7 +30,7 @@ from lab_modules import recordings
 from lab_modules.claims import Claim
 from lab_modules.estimators.continuous_discrete_ekf import OBSERVER_COLUMNS, run_observer
 from lab_modules.estimators.kalman import correction
-from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises import Analysis, Chart, Exercise, Plot, PoleCategory, Series
 from lab_modules.exercises._common import MAGLEV_LAGS, magnet_plant_names
 from lab_modules.loops.maglev_loop import MaglevSetup, loop_at_plant_input, preset_q
 from lab_modules.parameters import Parameter, ParameterError
@@ -346,6 +346,10 @@ class MaglevTuning(Exercise):
                   ("v error [m/s]", "ball position/velocity estimate error"),
                   ("i error [A]", "coil current estimate error")]
         return {"filter error (steady state)": (A_error, states, dt)}
+
+    def pole_categories(self, values: dict) -> dict[str, PoleCategory]:
+        return {"open-loop plant (linearised)": PoleCategory.PLANT,
+                "filter error (steady state)": PoleCategory.FILTER_ERROR}
 
     def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
         """The linearised plant's poles by name (at the recording's mean gap, as ``linearised_poles``)."""

@@ -44,7 +44,7 @@ from lab_modules.parameters import Parameter
 from lab_modules.plants.self_sensing_ball import RIG
 from lab_modules.scenes.self_sensing import SelfSensingScene
 
-from . import Action, Analysis, Chart, Exercise, Plot, Series
+from . import Action, Analysis, Chart, Exercise, Plot, PoleCategory, Series
 
 SAMPLE_TIMES_US = ("0.5", "1", "2")
 PWM_MODES = ("fixed T_pwm", "T_pwm = 1024 T_a")
@@ -143,6 +143,11 @@ def setup(values: dict, **changes) -> SelfSensingSetup:
 def fixed(values: dict, gap: str, **changes) -> SelfSensingSetup:
     """The experiment held at one operating point."""
     return setup(values, trajectory=TRAJECTORIES[1 if gap == "gap_1" else 2], **changes)
+
+
+def coil_pole_set(gap_m: float) -> str:
+    """The name of the pole set that holds the coil's pole −R/L at a gap [m] (``Analysis.poles``)."""
+    return f"coil −R/L at {gap_m * 1e3:g} mm"
 
 
 # -- derived per-period columns --------------------------------------------------------------------
@@ -365,6 +370,11 @@ class SelfSensing(Exercise):
                 "inductance_h": RIG.inductance_h(gaps).tolist(),
                 "equilibrium_current_a": RIG.equilibrium_current_a(gaps).tolist()}
 
+    def pole_categories(self, values: dict) -> dict[str, PoleCategory]:
+        """Each gap's coil pole −R/L (its set named after the gap) is the plant's."""
+        s = setup(values)
+        return {coil_pole_set(gap_m): PoleCategory.PLANT for gap_m in (s.gap_1_m, s.gap_2_m)}
+
     def analyse(self, values: dict):
         s = setup(values)
         v_bat = s.battery_voltage_v
@@ -402,7 +412,7 @@ class SelfSensing(Exercise):
                 (f"σ̂(L̄) {tag} (eq. 31)", st["predicted_sigma_inductance_uh"], "µH"),
                 (f"σ̂(ŝ) {tag} (eq. 32)", st["predicted_sigma_position_um"], "µm"),
             ]
-            poles[f"coil −R/L {tag}"] = np.array([-RIG.coil_resistance_ohm / inductance], dtype=complex)
+            poles[coil_pole_set(gap_m)] = np.array([-RIG.coil_resistance_ohm / inductance], dtype=complex)
         notes = [("Readouts from 300 PWM periods held at each gap with the current settings; the histogram "
                  "is from those at gap 1. *Run Monte-Carlo* (controls, left) checks σ̂(L̄) over "
                  f"{MONTE_CARLO_SEEDS} seeds × {MONTE_CARLO_PERIODS} periods.")]

@@ -44,7 +44,7 @@ import scipy.signal
 
 from lab_modules import analysis
 from lab_modules.claims import Claim
-from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises import Analysis, Chart, Exercise, Plot, PoleCategory, Series
 from lab_modules.exercises._common import AXIS_LAGS, controller_states, nearest_names, pid_from_values
 from lab_modules.loops.flexible_rotor_loop import (
     LOOP_OUTPUTS,
@@ -413,6 +413,9 @@ class SensorPlacement(Exercise):
                     ("x̂ [m]", "v̂ [m/s]", "î [A]", "x̂_d [m]")[:nc - npid]]
         states += estimate + controller_states(controller, V)
         return {"closed loop": (analysis.change_basis(A, basis), states, T)}
+
+    def pole_categories(self, values: dict) -> dict[str, PoleCategory]:
+        return {"open-loop plant": PoleCategory.PLANT, "closed loop": PoleCategory.CLOSED_LOOP}
 
     def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
         """The rotor's modes by name in the plant and the closed loop (``mode_poles``: by modal

@@ -39,7 +39,7 @@ from lab_modules.estimators.fuzzy_basis_network import (
     training_grid,
 )
 from lab_modules.estimators.stiffness_identification import lsm_factors
-from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises import Analysis, Chart, Exercise, Plot, PoleCategory, Series
 from lab_modules.exercises._stiffness_networks import (
     NETWORK_CONTROLS,
     NOISE_SEED,
@@ -511,6 +511,9 @@ class StiffnessMap(Exercise):
         """The PID that holds the rotor at the centre (on the FBFNN filter's estimate), k_Magnet before its step."""
         setup_ = loop_setup(values, networks(values))
         return {f"PID on {setup_.feedback}": loop_at_plant_input(setup_)}
+
+    def pole_categories(self, values: dict) -> dict[str, PoleCategory]:
+        return {"ADALINE weight error (rotor's weight)": PoleCategory.FILTER_ERROR}
 
     def analyse(self, values: dict):
         ki, ks_mm = identified_tables(values)

@@ -36,7 +36,7 @@ import numpy as np
 from lab_modules import analysis
 from lab_modules.claims import Claim
 from lab_modules.estimators.thrust_kalman import PAPER_Q_N2, H
-from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises import Analysis, Chart, Exercise, Plot, PoleCategory, Series
 from lab_modules.exercises._common import pairs
 from lab_modules.loops.thrust_liftoff_loop import (
     ThrustSetup,
@@ -395,6 +395,10 @@ class ThrustLiftoff(Exercise):
                 "filter error": ((np.eye(2) - np.outer(gain, H)) @ Phi,
                                  [("x error [m]", "position/velocity estimate error"),
                                   ("v error [m/s]", "position/velocity estimate error")], T)}
+
+    def pole_categories(self, values: dict) -> dict[str, PoleCategory]:
+        return {"open-loop plant": PoleCategory.PLANT, "closed loop with G(s)": PoleCategory.CLOSED_LOOP,
+                "closed loop without G(s)": PoleCategory.CLOSED_LOOP, "filter error": PoleCategory.FILTER_ERROR}
 
     def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
         """The open-loop plant's two poles (``analyse`` lists +a, then −a) by name."""
