@@ -179,7 +179,7 @@ def test_mode_labels_do_not_overlap():
     poles = {"plant": np.array([-100.0, -99.0, -98.0, -50.0, 0.5, 1.0, 40.0])}
     modes = pole_sets.modes(poles)
     x_range = (-110.0, 45.0)
-    splits, texts = pole_map._labels(modes, x_range)
+    splits, texts = pole_map.top_axis_labels(modes, x_range)
     px = np.array(splits) * pole_map.LABEL_PX / (x_range[1] - x_range[0])
     widths = np.array([len(t) for t in texts]) * pole_map.CHAR_PX
     assert np.all(np.diff(px) >= (widths[:-1] + widths[1:]) / 2)

@@ -106,7 +106,7 @@ def _label_text(group: list[Mode]) -> str:
     return ",".join(map(str, numbers)) if len(numbers) <= 2 else f"{numbers[0]},{numbers[1]},+{len(numbers) - 2}"
 
 
-def _labels(shown: list[Mode], x_range: tuple[float, float]) -> tuple[tuple[float, ...], tuple[str, ...]]:
+def top_axis_labels(shown: list[Mode], x_range: tuple[float, float]) -> tuple[tuple[float, ...], tuple[str, ...]]:
     """Top-axis positions and texts of the mode numbers; labels that would overlap (at
     ``LABEL_PX`` of plot width) merge into one ("3,7" or "3,7,+2": two more)."""
     px_per_unit = LABEL_PX / (x_range[1] - x_range[0])
@@ -171,7 +171,7 @@ def pole_map(poles: dict[str, np.ndarray], categories: dict[str, Category], titl
     columns = [np.full(len(x), np.nan) for _ in layers]
     for row, (_, value, k) in enumerate(rows):
         columns[k][row] = value
-    splits, texts = _labels(shown, x_range)
+    splits, texts = top_axis_labels(shown, x_range)
     axes = (viser.uplot.Axis(label="Re s [rad/s]"), viser.uplot.Axis(label="Im s [rad/s]", size=scope.Y_AXIS_SIZE),
             viser.uplot.Axis(side=0, scale="x", label="mode # (table below)", labelSize=16, size=20,
                              splits=splits, values=texts, grid={"show": False}, ticks={"show": True, "size": 4}))
