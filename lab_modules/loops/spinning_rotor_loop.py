@@ -178,15 +178,135 @@ def critical_speeds_rpm(speeds_rpm: np.ndarray, forward_hz: np.ndarray) -> list[
     return [float(speeds_rpm[i] - gap[i] * (speeds_rpm[i + 1] - speeds_rpm[i]) / (gap[i + 1] - gap[i])) for i in k]
 
 
-def unbalance_response(loop: LoopAtSpeed, unbalance_kg_m: float) -> np.ndarray:
+def unbalance_states(loop: LoopAtSpeed, unbalance_kg_m: float) -> np.ndarray:
     """Steady response to the unbalance's forward synchronous force U Omega^2 e^{i Omega t} at the
-    bearing plane, per speed: complex amplitudes (speeds, outputs) of ``LOOP_OUTPUTS`` (an
-    isotropic rotor whirls in a circle: |amplitude| is the orbit's radius, and each plane's
-    sinusoid's amplitude).  Discrete steady state: Z = (e^{i Omega T} I - A)^-1 B_f F."""
+    bearing plane, per speed: the loop's complex state amplitudes (speeds, states); the plant's
+    modal coordinates eta_1..n come first.  Discrete steady state: Z = (e^{i Omega T} I - A)^-1 B_f F."""
     omega = rad_s(loop.speeds_rpm)
     force = unbalance_kg_m * omega**2
     z = np.exp(1j * omega * RIG.sample_time_s)
     n = loop.A.shape[1]
-    states = np.linalg.solve(z[:, None, None] * np.eye(n)[None] - loop.A,
-                             loop.B[:, :, 1:2] * force[:, None, None])[:, :, 0]
-    return states @ loop.C.T + force[:, None] * loop.D[:, 1][None]
+    return np.linalg.solve(z[:, None, None] * np.eye(n)[None] - loop.A,
+                           loop.B[:, :, 1:2] * force[:, None, None])[:, :, 0]
+
+
+def unbalance_response(loop: LoopAtSpeed, unbalance_kg_m: float) -> np.ndarray:
+    """``unbalance_states`` as complex amplitudes (speeds, outputs) of ``LOOP_OUTPUTS``: an isotropic
+    rotor whirls in a circle, so |amplitude| is the orbit's radius, and each plane's sinusoid's
+    amplitude."""
+    force = unbalance_kg_m * rad_s(loop.speeds_rpm) ** 2
+    return unbalance_states(loop, unbalance_kg_m) @ loop.C.T + force[:, None] * loop.D[:, 1][None]
+
+
+class RunUpSimulation:
+    """Time simulation of the closed loop in both planes, the speed held or ramped (run-up).
+
+    The speed follows n(t) = min(n_set, n_0 + a t) (a = 0: held at n_set); the loop is
+    re-discretised every ``CHUNK`` samples at the chunk's mean speed (the gyroscopic matrix
+    changes with speed), and stepped exactly in between.  Inputs: the unbalance's force
+    U Omega^2 e^{i phi}, phi = integral of Omega dt, plus a random force at the bearing
+    (complex: independent in both planes) and the sensors' noise.  The run stops when the
+    rotor's orbit at the bearing reaches the touchdown bearing's clearance or either plane's
+    coil current reaches the amplifier's limit (beyond it the linear model no longer holds).
+    """
+
+    columns = ("x_bearing_m", "y_bearing_m", "sensor_reading_m", "current_a", "innovation_m", "speed_rpm")
+    CHUNK = 100                      # samples per re-discretisation (5 ms)
+
+    def __init__(self, plant: SpinningPlant, compensator: Compensator, speed_rpm: float, run_up_rpm_per_s: float,
+                 unbalance_kg_m: float, force_sigma_n: float, noise_sigma_v: tuple[float, float], seed: int = 0,
+                 clearance_m: float = RIG.touchdown_m, current_limit_a: float = RIG.current_limit_a,
+                 explain=lambda: ""):
+        self.plant, self.compensator = plant, compensator
+        self.sample_time_s = RIG.sample_time_s
+        self.target_rpm, self.rate_rpm_per_s = float(speed_rpm), float(run_up_rpm_per_s)
+        self.start_rpm = 0.0 if run_up_rpm_per_s > 0 else float(speed_rpm)
+        self.unbalance_kg_m = unbalance_kg_m
+        self.sigma = np.array([force_sigma_n, *noise_sigma_v])
+        self.rng = np.random.default_rng(seed)
+        self.clearance_m, self.current_limit_a = clearance_m, current_limit_a
+        self.explain = explain
+        self.state = np.zeros(closed_loop_at_speed(plant, compensator, [0.0]).A.shape[1], dtype=complex)
+        self.step, self.phase_rad = 0, 0.0
+        self.stop_reason = ""
+        self.stopped_at_s: float | None = None
+        self._loop_key: float | None = None
+
+    def carry_on_from(self, other: RunUpSimulation) -> RunUpSimulation:
+        """Continue ``other``'s run: time, spin angle, noise stream, speed reached and, if the loop
+        has the same order, state (a run-up goes on from the speed it had reached)."""
+        self.rng, self.step, self.phase_rad = other.rng, other.step, other.phase_rad
+        self.stopped_at_s, self.stop_reason = other.stopped_at_s, other.stop_reason
+        if self.rate_rpm_per_s > 0:
+            self.start_rpm = min(other.speed_at(other.step), self.target_rpm) - self.rate_rpm_per_s * self.step * \
+                self.sample_time_s
+        if other.state.shape == self.state.shape:
+            self.state[:] = other.state
+        return self
+
+    def speed_at(self, step) -> np.ndarray:
+        """Speed [rpm] at sample ``step`` (scalar or array)."""
+        ramp = self.start_rpm + self.rate_rpm_per_s * np.asarray(step) * self.sample_time_s
+        return np.minimum(ramp, self.target_rpm) if self.rate_rpm_per_s > 0 else np.full(np.shape(step),
+                                                                                          self.target_rpm)
+
+    def _loop(self, speed_rpm: float) -> LoopAtSpeed:
+        key = round(speed_rpm, 1)
+        if key != self._loop_key:
+            self._loop_key, self._cached = key, closed_loop_at_speed(self.plant, self.compensator, [key])
+        return self._cached
+
+    def advance(self, n_steps: int) -> np.ndarray:
+        if self.stopped_at_s is not None or n_steps <= 0:
+            return np.empty((0, 1 + len(self.columns)))
+        rows = []
+        done = 0
+        while done < n_steps and self.stopped_at_s is None:
+            count = min(self.CHUNK - self.step % self.CHUNK, n_steps - done)
+            rows.append(self._chunk(count))
+            done += count
+        return np.vstack(rows)
+
+    def _chunk(self, n_steps: int) -> np.ndarray:
+        steps = self.step + np.arange(n_steps)
+        speed = self.speed_at(steps)
+        loop = self._loop(float(np.mean(speed)))
+        omega = rad_s(speed)
+        phase = self.phase_rad + np.cumsum(omega) * self.sample_time_s - omega * self.sample_time_s
+        unbalance = self.unbalance_kg_m * omega**2 * np.exp(1j * phase)          # U Omega^2 e^{i phi} [N]
+        noise = (self.rng.standard_normal((3, n_steps)) + 1j * self.rng.standard_normal((3, n_steps))) \
+            * self.sigma[:, None]
+        U = np.vstack([np.zeros(n_steps), unbalance + noise[0], noise[1], noise[2]])
+        A, drive = loop.A[0], loop.B[0] @ U
+        X = np.empty((A.shape[0], n_steps), dtype=complex)
+        x = self.state
+        for k in range(n_steps):
+            X[:, k] = x
+            x = A @ x + drive[:, k]
+        Y = loop.C @ X + loop.D @ U
+        r_b, current = Y[LOOP_OUTPUTS.index("r_bearing_m")], Y[LOOP_OUTPUTS.index("current_a")]
+        touchdown = ~(np.abs(r_b) < self.clearance_m)
+        saturated = ~(np.maximum(np.abs(current.real), np.abs(current.imag)) < self.current_limit_a)
+        out = np.flatnonzero(touchdown | saturated)
+        done = n_steps
+        if out.size:
+            done = int(out[0]) + 1
+            self.stopped_at_s = (self.step + done) * self.sample_time_s
+            self.stop_reason = (f"the rotor's orbit at the bearing reached the touchdown bearing's "
+                                f"{self.clearance_m * 1e6:.0f} µm clearance at {speed[out[0]]:.0f} rpm"
+                                if touchdown[out[0]] else
+                                f"a coil current reached the amplifier's limit of {self.current_limit_a:.1f} A "
+                                f"at {speed[out[0]]:.0f} rpm, where the linear model ends")
+        else:
+            self.state = x
+        self.phase_rad = float(np.mod(phase[done - 1] + omega[done - 1] * self.sample_time_s, 2 * np.pi))
+        t = (self.step + np.arange(done)) * self.sample_time_s
+        self.step += done
+        return np.column_stack([t, r_b[:done].real, r_b[:done].imag,
+                                Y[LOOP_OUTPUTS.index("sensor_reading_m"), :done].real, current[:done].real,
+                                Y[LOOP_OUTPUTS.index("innovation_m"), :done].real, speed[:done]])
+
+    def status_message(self) -> str:
+        if self.stopped_at_s is None:
+            return ""
+        return f"Stopped at t = {self.stopped_at_s * 1e3:.1f} ms: {self.stop_reason}. {self.explain()}"
