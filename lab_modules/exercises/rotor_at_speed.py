@@ -330,7 +330,6 @@ class RotorAtSpeed(Exercise):
     parameters = PARAMETERS
     default_duration_s = 0.3
     claims = CLAIMS
-    locus = ("gain_factor", "closed loop")
     charts = (
         Chart("Rotor at the bearing", "µm", (
             Series("x (x-z plane)", "x_bearing_m", 1e6, "#1f77b4"),
@@ -340,10 +339,6 @@ class RotorAtSpeed(Exercise):
         Chart("Filter innovation", "µm", (Series("innovation ν_x (rigid model)", "innovation_m", 1e6, "#d62728"),)),
         Chart("Speed", "rpm", (Series("speed n", "speed_rpm", 1.0, "#7f7f7f"),)),
     )
-
-    def locus_matrices(self, values: dict, factors: tuple[float, ...]) -> tuple[list[np.ndarray], float]:
-        """The closed loop's (complex) state matrices at the set speed and these gain factors."""
-        return [loop(values, [values["speed_rpm"]], gain_factor=f).A[0] for f in factors], RIG.sample_time_s
 
     def model(self, values: dict) -> dict:
         plant, _, _ = plant_and_grid(values)
