@@ -242,3 +242,21 @@ def test_standstill_modes_agree_with_scipy_on_the_assembled_matrices():
     omega_sq = scipy.linalg.eigvalsh(rotor.K[np.ix_(free, free)], rotor.M[np.ix_(free, free)])
     np.testing.assert_allclose(rotor.natural_frequencies_hz(5)[1:], np.sqrt(omega_sq[1:5]) / (2 * np.pi), rtol=1e-9)
     assert solve_modes(rotor.K, rotor.M, rotor.constrained_dofs)[0][0] < 1.0     # round-off, not zero
+
+
+def test_whirl_scene_attaches_updates_and_animates_in_a_real_viser_scene():
+    """viser casts every property on assignment: the scene must pass its checks (colours as
+    uint8 arrays, segments (N, 2, 3)); the shaft's vertices move in both planes."""
+    import viser
+    server = viser.ViserServer(host="127.0.0.1", port=8463, verbose=False)
+    try:
+        values = ras.EXERCISE.resolve({"speed_rpm": 6000.0})
+        view = ras.EXERCISE.scene(values)
+        view.attach(server.scene)
+        view.update({**values, "shown_whirl": "backward", "sensor_offset_mm": 60.0})
+        view.animate(0.0, {})                                                   # 45° of whirl
+        moved = view.handles["shaft"].vertices - view.rest
+        assert np.ptp(moved[:, 1]) > 0.01 and np.ptp(moved[:, 2]) > 0.01      # both planes
+        assert view.frequency_hz < 0                                           # backward
+    finally:
+        server.stop()

@@ -267,7 +267,7 @@ def nearest_speed(speed_rpm: float) -> int:
 
 def whirl_shape(values: dict) -> tuple[np.ndarray, float]:
     """The shown mode's whirl at the set speed in the closed loop: complex displacement at the 3D
-    view's stations (normalised to 1 at its largest) and its signed frequency [Hz] (+ forward)."""
+    view's stations (1 at its largest) and its signed frequency [Hz] (+ forward)."""
     n = int(values["modes"])
     closed = loop(values, [values["speed_rpm"]])
     z, vectors = np.linalg.eig(closed.A[0])
@@ -277,7 +277,8 @@ def whirl_shape(values: dict) -> tuple[np.ndarray, float]:
                                                      int(values["shown_whirl"] == "forward")]
     stations = np.linspace(0.0, GEOMETRY.length_m, WhirlScene.STATIONS)
     shape = rotor_of(values).rotor.displacement(stations, n) @ vectors[:n, index]
-    return shape / np.max(np.abs(shape)), float(s[index].imag / (2 * np.pi))
+    largest = shape[np.argmax(np.abs(shape))]
+    return shape / largest, float(s[index].imag / (2 * np.pi))      # largest deflection real, 1 (phase 0)
 
 
 # -- plots -------------------------------------------------------------------------------

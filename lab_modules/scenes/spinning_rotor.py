@@ -35,6 +35,11 @@ ORBIT_POINTS = 48
 FORWARD, BACKWARD = (30, 120, 200), (200, 60, 160)
 
 
+def _colours(rgb: tuple[int, int, int]) -> np.ndarray:
+    """One colour for every orbit segment's two ends (viser's line segments take (N, 2, 3) uint8)."""
+    return np.broadcast_to(np.array(rgb, dtype=np.uint8), (ORBIT_POINTS, 2, 3)).copy()
+
+
 def _about_x(angle_rad: float) -> tuple[float, float, float, float]:
     """Quaternion (w, x, y, z) of a rotation about the shaft's axis x."""
     return (float(np.cos(angle_rad / 2)), float(np.sin(angle_rad / 2)), 0.0, 0.0)
@@ -100,7 +105,7 @@ class WhirlScene:
                               position=self._at(self._x(g.pivot_m), 0.0, 0.0))
         vertices, faces = tube(0.012, radius + 0.006, radius + 0.022)
         h["sensor"] = scene.add_mesh_simple(f"{ROOT}/sensor", vertices, faces, color=EDDY_CURRENT, scale=VIEW_SCALE)
-        h["orbits"] = [scene.add_line_segments(f"{ROOT}/orbits/{k}", self._orbit_segments(0.01), FORWARD,
+        h["orbits"] = [scene.add_line_segments(f"{ROOT}/orbits/{k}", self._orbit_segments(0.01), _colours(FORWARD),
                                                thickness=0.006, position=self._at(self._x(z), 0.0, 0.0))
                        for k, z in enumerate(ORBIT_STATIONS_M)]
         h["markers"] = [scene.add_icosphere(f"{ROOT}/orbits/{k}/marker", VIEW_SCALE * 0.012, FORWARD)
@@ -125,7 +130,7 @@ class WhirlScene:
         colour = FORWARD if self.frequency_hz >= 0 else BACKWARD
         for line, marker, radius in zip(h["orbits"], h["markers"], self.orbit_radius):
             line.points = self._orbit_segments(float(radius))
-            line.colors = colour
+            line.colors = _colours(colour)
             marker.color = colour
         direction = "forward" if self.frequency_hz >= 0 else "backward"
         h["mode_label"].text = (f"mode {int(values['shown_mode'])}, {direction} whirl: {abs(self.frequency_hz):.0f} Hz "
