@@ -529,6 +529,9 @@ class RotorAtSpeed(Exercise):
             "peak_unbalance_midspan_speed_rpm": float(fine[fine_peak]),
             "peak_unbalance_zone": iso_14839_2_zone(bearing[peak], clearance),
             "peak_unbalance_over_clearance": float(bearing[peak] / clearance),
+            "innovation_at_peak_um": float(np.abs(response[at, LOOP_OUTPUTS.index("innovation_m")]) * 1e6),
+            "innovation_at_half_peak_speed_um": float(np.abs(response[at // 2, LOOP_OUTPUTS.index("innovation_m")])
+                                                      * 1e6),
             "first_critical_speed_rpm": set_criticals[0] if set_criticals else float("nan"),
             "peak_speed_over_critical_speed": float(fine[fine_peak] / set_criticals[0]) if set_criticals
             else float("nan"),
@@ -586,7 +589,8 @@ def unbalance_plot(values: dict, response: np.ndarray, midspan_m: np.ndarray) ->
     clearance_um = values["clearance_um"]
     series = [(f"rotor at mid-span ({MIDSPAN_M * 1e3:.0f} mm)", midspan_m * 1e6, "#9467bd"), ("rotor at the bearing", np.abs(response[:, LOOP_OUTPUTS.index("r_bearing_m")]) * 1e6, "#1f77b4"),
               ("rotor at the sensor", np.abs(response[:, LOOP_OUTPUTS.index("r_sensor_m")]) * 1e6, "#ff7f0e"),
-              ("control current × 10 µm/A", np.abs(response[:, LOOP_OUTPUTS.index("current_a")]) * 10, "#2ca02c")]
+              ("control current × 10 µm/A", np.abs(response[:, LOOP_OUTPUTS.index("current_a")]) * 10, "#2ca02c"),
+              ("filter innovation ν", np.abs(response[:, LOOP_OUTPUTS.index("innovation_m")]) * 1e6, "#d62728")]
     colours = {"A": "#31a354", "B": "#fdae6b", "C": "#e6550d"}
     series += [(f"zone {zone}/{chr(ord(zone) + 1)} limit {limit:.1f} C_min", np.full(len(CAMPBELL_SPEEDS_RPM),
                                                                                   limit * clearance_um), colours[zone])
