@@ -85,6 +85,8 @@ from lab_modules.scenes.spinning_rotor import WhirlScene
 CAMPBELL_SPEEDS_RPM = np.linspace(*SPEED_RANGE_RPM, 61)
 #: Speeds [rpm] of the stability-limit curve (largest stable gain factor): every 1,000 rpm.
 LIMIT_SPEEDS_RPM = np.linspace(*SPEED_RANGE_RPM, 13)
+#: The plots' speed axis, in thousands of rpm (a last tick label "12,000" would not fit the chart).
+SPEED_AXIS = "speed n [1000 rpm]"
 GAIN_GRID = np.round(np.arange(0.1, 4.0 + 1e-9, 0.1), 2)   # gain factors tried before bisecting
 #: Where the first bending mode (mode 2) moves most, between the ball bearing and the stack: its
 #: critical speed shows there, while the bearing plane sits near that mode's node.
@@ -562,8 +564,9 @@ def campbell_plot(values: dict, free: np.ndarray, swept, criticals: list[float])
     marks = [("set speed", values["speed_rpm"], 0.0, top, "#000000")]
     marks += [("critical speeds", c, c / 60 - 40.0, c / 60 + 40.0, "#e6550d") for c in criticals]
     x, out = with_marks(CAMPBELL_SPEEDS_RPM, series, marks)
+    x = x / 1000
     return Plot(f"Campbell diagram ({values['beam_theory']}; closed loop with the {sensor_name(values['sensor_offset_mm'])}"
-                " sensor)", "speed [rpm]", "whirl frequency [Hz]", x, tuple(out))
+                " sensor)", SPEED_AXIS, "whirl frequency [Hz]", x, tuple(out))
 
 
 def damping_plot(name: str, swept) -> Plot:
@@ -573,14 +576,14 @@ def damping_plot(name: str, swept) -> Plot:
     for j in range(shown):
         series.append((f"mode {j + 1} forward", 100 * swept.damping[:, j, 1], MODE_COLOURS[j]))
         series.append((f"mode {j + 1} backward", 100 * swept.damping[:, j, 0], BACKWARD_COLOURS[j]))
-    return Plot(f"Closed-loop damping against speed, {name} sensor", "speed [rpm]", "damping ζ [%]",
-                swept.speeds_rpm, tuple(series))
+    return Plot(f"Closed-loop damping against speed, {name} sensor", SPEED_AXIS, "damping ζ [%]",
+                swept.speeds_rpm / 1000, tuple(series))
 
 
 def limit_plot(limits: dict) -> Plot:
     colours = ("#1f77b4", "#d62728")
-    return Plot("Stability limit against speed: largest stable gain factor", "speed [rpm]", "gain factor [×]",
-                LIMIT_SPEEDS_RPM, tuple((name, limits[name], colour) for name, colour in zip(SENSORS, colours))
+    return Plot("Stability limit against speed: largest stable gain factor", SPEED_AXIS, "gain factor [×]",
+                LIMIT_SPEEDS_RPM / 1000, tuple((name, limits[name], colour) for name, colour in zip(SENSORS, colours))
                 + (("nominal gains", np.ones(len(LIMIT_SPEEDS_RPM)), "#7f7f7f"),))
 
 
@@ -596,7 +599,8 @@ def unbalance_plot(values: dict, response: np.ndarray, midspan_m: np.ndarray) ->
                                                                                   limit * clearance_um), colours[zone])
                for zone, limit in ISO_14839_2_LIMITS]
     return Plot(f"Unbalance response ({values['balance_grade']}, U at the stack) and ISO 14839-2 zones",
-                "speed [rpm]", "orbit radius [µm]", CAMPBELL_SPEEDS_RPM, tuple(series), log_y=True, log_decades=4)
+                SPEED_AXIS, "orbit radius [µm]", CAMPBELL_SPEEDS_RPM / 1000, tuple(series), log_y=True,
+                log_decades=4)
 
 
 
