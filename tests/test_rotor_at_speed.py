@@ -142,13 +142,14 @@ def test_unbalance_response_is_what_the_simulation_settles_to():
 def test_run_up_passes_the_critical_speed_and_carries_on_after_a_retune():
     values = ras.EXERCISE.resolve({"speed_rpm": 6000.0, "run_up_rpm_per_s": 10000.0})
     sim = ras.EXERCISE.simulation(values)
+    speed = 1 + RunUpSimulation.columns.index("speed_rpm")
     first = sim.advance(2000)
-    assert first[0, -1] == 0.0 and first[-1, -1] == pytest.approx(1000.0, abs=1.0)
+    assert first[0, speed] == 0.0 and first[-1, speed] == pytest.approx(1000.0, abs=1.0)
     retuned = ras.EXERCISE.retune(sim, {**values, "gain_factor": 1.2})
     assert isinstance(retuned, RunUpSimulation)
     second = retuned.advance(2000)
     assert second[0, 0] == pytest.approx(first[-1, 0] + sim.sample_time_s)
-    assert second[0, -1] == pytest.approx(first[-1, -1] + 0.5, abs=1.0)
+    assert second[0, speed] == pytest.approx(first[-1, speed] + 0.5, abs=1.0)
 
 
 def test_critical_speed_interpolates_the_crossing_of_the_1x_line():
@@ -260,3 +261,17 @@ def test_whirl_scene_attaches_updates_and_animates_in_a_real_viser_scene():
         assert view.frequency_hz < 0                                           # backward
     finally:
         server.stop()
+
+
+def test_a_run_up_shows_the_critical_speed_at_mid_span():
+    """Run-up 0 -> 12,000 rpm at 6000 rpm/s: the mid-span deflection (scope column x_watched_m) peaks
+    just past the Campbell diagram's first critical speed (the mode lags a fast run-up) and stands
+    well above its level at 5000 rpm."""
+    values = ras.EXERCISE.resolve({"speed_rpm": 12000.0, "run_up_rpm_per_s": 6000.0, "balance_grade": "G 6.3"})
+    critical = ras.EXERCISE.metrics(values, 0.01)["first_critical_speed_rpm"]
+    trace = ras.EXERCISE.simulation(values).advance(round(2.0 / 50e-6))
+    columns = ("t",) + RunUpSimulation.columns
+    speed, midspan = trace[:, columns.index("speed_rpm")], np.abs(trace[:, columns.index("x_watched_m")])
+    peak_speed = speed[np.argmax(midspan)]
+    assert critical < peak_speed < critical + 1500.0
+    assert midspan.max() > 3 * midspan[(speed > 4500) & (speed < 5500)].max()

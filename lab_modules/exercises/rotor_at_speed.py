@@ -334,10 +334,11 @@ class RotorAtSpeed(Exercise):
     default_duration_s = 0.3
     claims = CLAIMS
     charts = (
-        Chart("Rotor at the bearing", "µm", (
-            Series("x (x-z plane)", "x_bearing_m", 1e6, "#1f77b4"),
-            Series("y (y-z plane)", "y_bearing_m", 1e6, "#ff7f0e"),
-            Series("sensor reading x", "sensor_reading_m", 1e6, "#b0b0b0"))),
+        Chart("Rotor position", "µm", (
+            Series("bearing x (x-z plane)", "x_bearing_m", 1e6, "#1f77b4"),
+            Series("bearing y (y-z plane)", "y_bearing_m", 1e6, "#ff7f0e"),
+            Series("sensor reading x", "sensor_reading_m", 1e6, "#b0b0b0"),
+            Series(f"x at mid-span ({MIDSPAN_M * 1e3:.0f} mm)", "x_watched_m", 1e6, "#9467bd"))),
         Chart("Coil current", "A", (Series("coil current i_x", "current_a", 1.0, "#2ca02c"),)),
         Chart("Filter innovation", "µm", (Series("innovation ν_x (rigid model)", "innovation_m", 1e6, "#d62728"),)),
         Chart("Speed", "rpm", (Series("speed n", "speed_rpm", 1.0, "#7f7f7f"),)),
@@ -457,7 +458,9 @@ class RotorAtSpeed(Exercise):
         return RunUpSimulation(plant, compensator(values), values["speed_rpm"], values["run_up_rpm_per_s"],
                                unbalance_kg_m(values), values["disturbance_force_n"],
                                (K_MX * sensor_noise_m(values), K_MI * CURRENT_NOISE_A), seed=int(values["seed"]),
-                               clearance_m=values["clearance_um"] * 1e-6, explain=explain)
+                               clearance_m=values["clearance_um"] * 1e-6,
+                               watched_row=rotor_of(values).rotor.displacement(MIDSPAN_M, int(values["modes"]))[0],
+                               explain=explain)
 
     def retune(self, simulation: RunUpSimulation, values: dict) -> RunUpSimulation:
         return self.simulation(values).carry_on_from(simulation)

@@ -205,18 +205,20 @@ class RunUpSimulation:
     re-discretised every ``CHUNK`` samples at the chunk's mean speed (the gyroscopic matrix
     changes with speed), and stepped exactly in between.  Inputs: the unbalance's force
     U Omega^2 e^{i phi}, phi = integral of Omega dt, plus a random force at the bearing
-    (complex: independent in both planes) and the sensors' noise.  The run stops when the
+    (complex: independent in both planes) and the sensors' noise; ``watched_row`` (over the plant's
+    states) adds the x-z plane's deflection at one more point of the shaft.  The run stops when the
     rotor's orbit at the bearing reaches the touchdown bearing's clearance or either plane's
     coil current reaches the amplifier's limit (beyond it the linear model no longer holds).
     """
 
-    columns = ("x_bearing_m", "y_bearing_m", "sensor_reading_m", "current_a", "innovation_m", "speed_rpm")
+    columns = ("x_bearing_m", "y_bearing_m", "sensor_reading_m", "current_a", "innovation_m", "speed_rpm",
+               "x_watched_m")
     CHUNK = 100                      # samples per re-discretisation (5 ms)
 
     def __init__(self, plant: SpinningPlant, compensator: Compensator, speed_rpm: float, run_up_rpm_per_s: float,
                  unbalance_kg_m: float, force_sigma_n: float, noise_sigma_v: tuple[float, float], seed: int = 0,
                  clearance_m: float = RIG.touchdown_m, current_limit_a: float = RIG.current_limit_a,
-                 explain=lambda: ""):
+                 watched_row: np.ndarray | None = None, explain=lambda: ""):
         self.plant, self.compensator = plant, compensator
         self.sample_time_s = RIG.sample_time_s
         self.target_rpm, self.rate_rpm_per_s = float(speed_rpm), float(run_up_rpm_per_s)
@@ -227,6 +229,9 @@ class RunUpSimulation:
         self.clearance_m, self.current_limit_a = clearance_m, current_limit_a
         self.explain = explain
         self.state = np.zeros(closed_loop_at_speed(plant, compensator, [0.0]).A.shape[1], dtype=complex)
+        # x at a watched point of the shaft [m] from the plant's states (e.g. where a mode moves most)
+        self.watched_row = np.zeros(len(self.state)) if watched_row is None else \
+            np.concatenate([watched_row, np.zeros(len(self.state) - len(watched_row))])
         self.step, self.phase_rad = 0, 0.0
         self.stop_reason = ""
         self.stopped_at_s: float | None = None
@@ -304,7 +309,8 @@ class RunUpSimulation:
         self.step += done
         return np.column_stack([t, r_b[:done].real, r_b[:done].imag,
                                 Y[LOOP_OUTPUTS.index("sensor_reading_m"), :done].real, current[:done].real,
-                                Y[LOOP_OUTPUTS.index("innovation_m"), :done].real, speed[:done]])
+                                Y[LOOP_OUTPUTS.index("innovation_m"), :done].real, speed[:done],
+                                (self.watched_row @ X[:, :done]).real])
 
     def status_message(self) -> str:
         if self.stopped_at_s is None:
