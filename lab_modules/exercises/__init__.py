@@ -264,6 +264,7 @@ MODULES = (
     "ekf_disturbance",
     "lqg_vs_pid",
     "sensor_placement",
+    "rotor_at_speed",
     "maglev_tracking",
     "maglev_tuning",
     "thrust_liftoff",
