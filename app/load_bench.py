@@ -244,16 +244,18 @@ class Tab:
 
     def stall(self, start: float, end: float) -> str | None:
         """Why the tab stalled in [start, end): it ended early, or no scope update came for more
-        than ``STALL_S`` (then whether any message came in the longest such gap); None if it did not."""
+        than ``STALL_S`` (then whether any message came in the longest such gap, and whether the
+        gap lasted to the end: a silent connection, not a slow server); None if it did not."""
         if self.ended_at is not None and self.ended_at < end:
             return self.closed
         arrivals = [start] + [t for t in self.scope_times if start <= t < end] + [end]
-        gap_s, gap_start = max((b - a, a) for a, b in itertools.pairwise(arrivals))
+        gap_s, gap_start, gap_end = max((b - a, a, b) for a, b in itertools.pairwise(arrivals))
         if gap_s <= STALL_S:
             return None
-        frames = sum(gap_start < t < gap_start + gap_s for t in self.frame_times)
-        return (f"messages but no scope update for {gap_s:.1f} s ({frames} frames)" if frames
-                else f"no message at all for {gap_s:.1f} s")
+        frames = sum(gap_start < t < gap_end for t in self.frame_times)
+        until = " until the end of the window" if gap_end == end else ""   # else it streamed again
+        return (f"messages but no scope update for {gap_s:.1f} s{until} ({frames} frames)" if frames
+                else f"no message at all for {gap_s:.1f} s{until}")
 
     def rate(self, start: float, end: float) -> float:
         """Scope updates per second in [start, end)."""
