@@ -242,15 +242,19 @@ class Tab:
     def _ended(self, why: str) -> None:
         self.closed, self.ended_at = why, time.perf_counter()
 
-    def stall(self, start: float, end: float) -> str | None:
+    def longest_gap(self, start: float, end: float) -> tuple[float, float, float]:
+        """(seconds, start, end) of the longest time without a scope update in [start, end)."""
+        arrivals = [start] + [t for t in self.scope_times if start <= t < end] + [end]
+        return max((b - a, a, b) for a, b in itertools.pairwise(arrivals))
+
+    def stall(self, start: float, end: float, limit_s: float = STALL_S) -> str | None:
         """Why the tab stalled in [start, end): it ended early, or no scope update came for more
-        than ``STALL_S`` (then whether any message came in the longest such gap, and whether the
+        than ``limit_s`` (then whether any message came in the longest such gap, and whether the
         gap lasted to the end: a silent connection, not a slow server); None if it did not."""
         if self.ended_at is not None and self.ended_at < end:
             return self.closed
-        arrivals = [start] + [t for t in self.scope_times if start <= t < end] + [end]
-        gap_s, gap_start, gap_end = max((b - a, a, b) for a, b in itertools.pairwise(arrivals))
-        if gap_s <= STALL_S:
+        gap_s, gap_start, gap_end = self.longest_gap(start, end)
+        if gap_s <= limit_s:
             return None
         frames = sum(gap_start < t < gap_end for t in self.frame_times)
         until = " until the end of the window" if gap_end == end else ""   # else it streamed again
