@@ -258,8 +258,16 @@ class Tab:
             return None
         frames = sum(gap_start < t < gap_end for t in self.frame_times)
         until = " until the end of the window" if gap_end == end else ""   # else it streamed again
-        return (f"messages but no scope update for {gap_s:.1f} s{until} ({frames} frames)" if frames
-                else f"no message at all for {gap_s:.1f} s{until}")
+        why = (f"messages but no scope update for {gap_s:.1f} s{until} ({frames} frames)" if frames
+               else f"no message at all for {gap_s:.1f} s{until}")
+        if gap_start > start:
+            return why
+        before = [t for t in self.scope_times if t < start]        # the window began in the gap
+        last_frame = max((t for t in self.frame_times if t < start), default=None)
+        if not before:
+            return why + f"; no scope update since it opened ({len(self.frame_times)} frames in all)"
+        return why + (f"; before the window {len(before)} scope updates, the last {start - before[-1]:.1f} s "
+                      f"before it, the last message {start - last_frame:.1f} s before it")
 
     def rate(self, start: float, end: float) -> float:
         """Scope updates per second in [start, end)."""

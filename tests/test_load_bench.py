@@ -22,6 +22,14 @@ def test_a_silent_connection_stalled_until_the_end():
     assert _tab([0.5, 1.0, 1.5]).stall(0.0, 10.0) == "no message at all for 8.5 s until the end of the window"
 
 
+def test_a_connection_silent_since_before_the_window_tells_what_came_before():
+    tab = _tab([0.04 * k for k in range(1, 488)], frame_times=[19.6])
+    assert tab.stall(30.0, 38.0) == ("no message at all for 8.0 s until the end of the window; before the window "
+                                     "487 scope updates, the last 10.5 s before it, the last message 10.4 s before it")
+    assert _tab([], frame_times=[1.0, 2.0]).stall(30.0, 38.0) == \
+        "no message at all for 8.0 s until the end of the window; no scope update since it opened (2 frames in all)"
+
+
 def test_a_slow_server_stalled_and_streamed_again():
     assert _tab([1.0, 4.0, 4.5, 5.0, 9.8]).stall(0.0, 10.0) == "no message at all for 4.8 s"
 
