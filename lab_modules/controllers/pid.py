@@ -5,14 +5,29 @@ e [V] (reference minus fed-back position, in sensor volts) to the amplifier
 reference i_ref [V] (paper 000, §IV); ``setpoint_filter`` is the reference
 filter that makes it an I-PD.  The simulation kernels only ever see
 matrices, so any discrete SISO controller (PID, lead-lag, the integral part
-of an LQG) plugs into the same loop; ``controller_step`` is their compiled
-step.
+of an LQG) plugs into the same loop: a ``DiscreteController`` bundle, which
+``controller_step`` steps.
 """
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import control
 import numba
+import numpy as np
+
+
+class DiscreteController(NamedTuple):
+    """A discrete SISO controller as the compiled loops step it (``controller_step``):
+    ctrl_{k+1} = A ctrl_k + B e_k,  u_k = C ctrl_k + D e_k, with e and u in the loop's
+    units (bearing loops: e [V] -> i_ref [V]; maglev lead-lag: e [m] -> coil voltage [V])."""
+
+    state: np.ndarray   # (n_c,) controller state ctrl, advanced in place [the realisation's own units]
+    A: np.ndarray       # (n_c, n_c) state matrix [-]
+    B: np.ndarray       # (n_c, 1) input column [state per unit of e]
+    C: np.ndarray       # (1, n_c) output row [unit of u per state]
+    D: np.ndarray       # (1, 1) feedthrough [unit of u per unit of e]
 
 
 def pid(gain: float, integral_time_s: float, derivative_time_s: float,
@@ -69,16 +84,17 @@ def setpoint_filter(integral_time_s: float, derivative_time_s: float, derivative
 
 
 @numba.njit(inline="always")
-def controller_step(e, offset_v, u_limit, ctrl, Ac, Bc, Cc, Dc, work):
-    """One sample of a discrete SISO controller (Ac, Bc, Cc, Dc) in a compiled loop.
+def controller_step(e, offset_v, u_limit, controller, work):
+    """One sample of a discrete SISO controller (a ``DiscreteController``) in a compiled loop.
 
-    Returns the output Cc ctrl + Dc e + offset_v for the error e (e [V] and
+    Returns the output C ctrl + D e + offset_v for the error e (e [V] and
     i_ref [V] in the bearing loops), clipped at ±u_limit (the amplifier limit;
     inf: none), and advances the state
-    ctrl <- Ac ctrl + Bc e in place (``work``: scratch of ctrl's size).  The
+    ctrl <- A ctrl + B e in place (``work``: scratch of ctrl's size).  The
     offset carries what the loop adds to the controller: a state feedback
     -K_s x_hat (eq. 22), a feedforward or an operating point.  Inlined into
     the caller, so it is compiled with the caller's options."""
+    ctrl, Ac, Bc, Cc, Dc = controller.state, controller.A, controller.B, controller.C, controller.D
     n_c = ctrl.shape[0]
     u = Dc[0, 0] * e + offset_v
     for r in range(n_c):
