@@ -5,8 +5,8 @@ e [V] (reference minus fed-back position, in sensor volts) to the amplifier
 reference i_ref [V] (paper 000, §IV); ``setpoint_filter`` is the reference
 filter that makes it an I-PD.  The simulation kernels only ever see
 matrices, so any discrete SISO controller (PID, lead-lag, the integral part
-of an LQG) plugs into the same loop: a ``DiscreteController`` bundle, which
-``controller_step`` steps.
+of an LQG) plugs into the same loop: a kernel takes it as a
+``DiscreteController`` bundle and steps it with ``controller_step``.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import numpy as np
 
 
 class DiscreteController(NamedTuple):
-    """A discrete SISO controller as the compiled loops step it (``controller_step``):
+    """A discrete SISO controller as the compiled loops take it (stepped by ``controller_step``):
     ctrl_{k+1} = A ctrl_k + B e_k,  u_k = C ctrl_k + D e_k, with e and u in the loop's
     units (bearing loops: e [V] -> i_ref [V]; maglev lead-lag: e [m] -> coil voltage [V])."""
 
@@ -84,17 +84,18 @@ def setpoint_filter(integral_time_s: float, derivative_time_s: float, derivative
 
 
 @numba.njit(inline="always")
-def controller_step(e, offset_v, u_limit, controller, work):
-    """One sample of a discrete SISO controller (a ``DiscreteController``) in a compiled loop.
+def controller_step(e, offset_v, u_limit, ctrl, Ac, Bc, Cc, Dc, work):
+    """One sample of a discrete SISO controller (Ac, Bc, Cc, Dc) in a compiled loop.
 
-    Returns the output C ctrl + D e + offset_v for the error e (e [V] and
+    Returns the output Cc ctrl + Dc e + offset_v for the error e (e [V] and
     i_ref [V] in the bearing loops), clipped at ±u_limit (the amplifier limit;
     inf: none), and advances the state
-    ctrl <- A ctrl + B e in place (``work``: scratch of ctrl's size).  The
+    ctrl <- Ac ctrl + Bc e in place (``work``: scratch of ctrl's size).  The
     offset carries what the loop adds to the controller: a state feedback
     -K_s x_hat (eq. 22), a feedforward or an operating point.  Inlined into
-    the caller, so it is compiled with the caller's options."""
-    ctrl, Ac, Bc, Cc, Dc = controller.state, controller.A, controller.B, controller.C, controller.D
+    the caller, so it is compiled with the caller's options.  The arrays come in
+    one by one: a kernel reads them out of its ``DiscreteController`` once, before its
+    loop (an array read out of a bundle inside the loop costs a reference count per sample)."""
     n_c = ctrl.shape[0]
     u = Dc[0, 0] * e + offset_v
     for r in range(n_c):

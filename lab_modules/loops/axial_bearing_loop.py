@@ -187,11 +187,22 @@ class Identification(NamedTuple):
     adaline_rate: float       # η of eq. 24 in the paper's units (φ [A²/mm²], k_Magnet [N mm²/A²])
 
 
+class AxialRig(NamedTuple):
+    """The rig's constants the plant's rates need (``_derivatives``)."""
+
+    mass_kg: float                # rotor mass m [kg]
+    gravity_m_per_s2: float       # g [m/s²]
+    gap_m: float                  # nominal air gap s0 [m]
+    bias_current_a: float         # bias current i0 [A]
+    sensor_lag_s: float           # T_Sen of eq. 18 [s]
+    sensor_gain_v_per_m: float    # K_Sen of eq. 18 [V/m]
+
+
 @njit(cache=True, nogil=True)
-def _derivatives(x, v, xm, current, load, k_magnet, physics):
+def _derivatives(x, v, xm, current, load, k_magnet, rig):
     """Rates of x [m], v [m/s] and the sensor output x_M [V] (eq. 1-2, 18) for the plant's k_Magnet."""
-    accel = (magnet_force(current, x, k_magnet, physics[GAP], physics[BIAS]) + load) / physics[MASS] - physics[GRAVITY]
-    return v, accel, (physics[SENSOR_GAIN] * x - xm) / physics[SENSOR_LAG]
+    accel = (magnet_force(current, x, k_magnet, rig.gap_m, rig.bias_current_a) + load) / rig.mass_kg - rig.gravity_m_per_s2
+    return v, accel, (rig.sensor_gain_v_per_m * x - xm) / rig.sensor_lag_s
 
 
 @njit(cache=True, nogil=True)
@@ -204,9 +215,16 @@ def run(n_steps, state, physics, schedule, pid, filters, identification, noise, 
     schedule : ``Schedule``; pid : ``AxialPID``; filters : ``FilterBank`` (in place);
     identification : ``Identification``;
     noise : (n_steps, 4) draws: sensor [V], current [A], measured force [N], force random walk [N]."""
+    # every field read once, before the loop: an array read out of a bundle inside the loop
+    # would cost a reference count per sample
+    segments, period, load_ramp = schedule.segments, schedule.period_s, schedule.load_ramp_s
+    k_magnet_nominal, filter_z, filter_P = schedule.k_magnet, filters.z, filters.P
+    centres, fbf_ki_w, fbf_ki_s = identification.centres, identification.ki_weights, identification.ki_widths
+    fbf_ks_w, fbf_ks_s = identification.ks_weights, identification.ks_widths
+    stencil_a, stencil_m, adaline_rate = identification.stencil_a, identification.stencil_m, identification.adaline_rate
     T, sensor_gain, gap, bias = physics[SAMPLE], physics[SENSOR_GAIN], physics[GAP], physics[BIAS]
-    period, load_ramp, segments = schedule.period_s, schedule.load_ramp_s, schedule.segments
-    filter_z, filter_P = filters.z, filters.P
+    rig = AxialRig(mass_kg=physics[MASS], gravity_m_per_s2=physics[GRAVITY], gap_m=gap, bias_current_a=bias,
+                   sensor_lag_s=physics[SENSOR_LAG], sensor_gain_v_per_m=sensor_gain)
     A = np.zeros((N_STATES, N_STATES))
     B = np.zeros((N_STATES, 2))
     Q = np.zeros((N_STATES, N_STATES))
@@ -239,7 +257,7 @@ def run(n_steps, state, physics, schedule, pid, filters, identification, noise, 
             previous = load
         if load_ramp > 0.0 and tau - segments[seg, 0] < load_ramp:
             load = previous + (load - previous) * (tau - segments[seg, 0]) / load_ramp
-        k_magnet = schedule.k_magnet * k_factor
+        k_magnet = k_magnet_nominal * k_factor
         load += state[S_WALK]
         state[S_WALK] += noise[k, 3]
         x, v, xm = state[S_X], state[S_V], state[S_XM]
@@ -277,7 +295,7 @@ def run(n_steps, state, physics, schedule, pid, filters, identification, noise, 
         # ADALINE (SISO, paper units: A, mm, N)
         force_true = magnet_force(current, x, k_magnet, gap, bias)
         phi_mm = force_shape(current, position, gap, bias) * 1e-6
-        state[S_ADALINE] = siso_step(state[S_ADALINE], phi_mm, force_true + noise[k, 2], identification.adaline_rate)
+        state[S_ADALINE] = siso_step(state[S_ADALINE], phi_mm, force_true + noise[k, 2], adaline_rate)
         # record (a posteriori estimates at k)
         row = out[k]
         row[0] = t
@@ -299,18 +317,15 @@ def run(n_steps, state, physics, schedule, pid, filters, identification, noise, 
         # 0 fixed
         predict_linear(filter_z[0], filter_P[0], A_fixed, B_fixed, Q_fixed, command)
         # 1 FBFNN-scheduled
-        ki_f = evaluate(command, filter_z[1][0], identification.centres, identification.ki_weights,
-                        identification.ki_widths)
-        ks_f = evaluate(command, filter_z[1][0], identification.centres, identification.ks_weights,
-                        identification.ks_widths)
+        ki_f = evaluate(command, filter_z[1][0], centres, fbf_ki_w, fbf_ki_s)
+        ks_f = evaluate(command, filter_z[1][0], centres, fbf_ks_w, fbf_ks_s)
         row[25] = ki_f
         row[26] = ks_f
         model_matrices(ki_f, ks_f, physics, A, B)
         process_noise(physics, B, Q)
         predict_linear(filter_z[1], filter_P[1], A, B, Q, command)
         # 2 exact LSM
-        ki_l, ks_l = lsm_factors_at(command, filter_z[2][0], identification.stencil_a, identification.stencil_m,
-                                    physics[K_MAGNET], gap, bias)
+        ki_l, ks_l = lsm_factors_at(command, filter_z[2][0], stencil_a, stencil_m, physics[K_MAGNET], gap, bias)
         row[27] = ki_l
         row[28] = ks_l
         model_matrices(ki_l, ks_l, physics, A, B)
@@ -322,13 +337,13 @@ def run(n_steps, state, physics, schedule, pid, filters, identification, noise, 
         row[30] = k_magnet * 1e6
         # plant: RK4 over the sample, current held
         for _ in range(RK4_SUBSTEPS):
-            d1 = _derivatives(x, v, xm, current, load, k_magnet, physics)
+            d1 = _derivatives(x, v, xm, current, load, k_magnet, rig)
             d2 = _derivatives(x + 0.5 * h * d1[0], v + 0.5 * h * d1[1], xm + 0.5 * h * d1[2], current, load,
-                              k_magnet, physics)
+                              k_magnet, rig)
             d3 = _derivatives(x + 0.5 * h * d2[0], v + 0.5 * h * d2[1], xm + 0.5 * h * d2[2], current, load,
-                              k_magnet, physics)
+                              k_magnet, rig)
             d4 = _derivatives(x + h * d3[0], v + h * d3[1], xm + h * d3[2], current, load,
-                              k_magnet, physics)
+                              k_magnet, rig)
             x += h / 6 * (d1[0] + 2 * d2[0] + 2 * d3[0] + d4[0])
             v += h / 6 * (d1[1] + 2 * d2[1] + 2 * d3[1] + d4[1])
             xm += h / 6 * (d1[2] + 2 * d2[2] + 2 * d3[2] + d4[2])

@@ -227,12 +227,16 @@ def run(n_steps, t0, dt, ball, ekf, control, refs, noise, trace):
     refs : (n_steps, 4) y_R, y_R', y_R'', y_R''' [m, m/s, m/s², m/s³].
     noise : (n_steps, 3) standard normal draws: sensor, velocity, current.
     trace : (n_steps, 1 + len(TRACE_COLUMNS)) output."""
-    x, x_hat, P, xc = ball.state, ekf.x_hat, ekf.P, control.lead_lag.state
-    p_true, p, k, Q, plant_q = ball.constants, ekf.constants, control.gain, ekf.Q, ball.process_density
-    r, controller, filter_kind = ekf.R_m2, control.kind, ekf.kind
+    # every field read once, before the loop: an array read out of a bundle inside the loop
+    # would cost a reference count per sample
+    x, p_true, plant_q, sensor_variance = ball.state, ball.constants, ball.process_density, ball.sensor_variance_m2
+    filter_kind, x_hat, P, Q, r, p, substeps = ekf.kind, ekf.x_hat, ekf.P, ekf.Q, ekf.R_m2, ekf.constants, ekf.substeps
+    controller, k, u0 = control.kind, control.gain, control.u0_v
+    lead_lag = control.lead_lag
+    xc, Ac, Bc, Cc, Dc = lead_lag.state, lead_lag.A, lead_lag.B, lead_lag.C, lead_lag.D
     gain = np.empty(3)
     x_next = np.empty(3)
-    sigma = np.sqrt(ball.sensor_variance_m2)
+    sigma = np.sqrt(sensor_variance)
     sq_v, sq_i = np.sqrt(plant_q[1] * dt), np.sqrt(plant_q[2] * dt)
     xc_next = np.empty(xc.shape[0])
     for step in range(n_steps):
@@ -244,7 +248,7 @@ def run(n_steps, t0, dt, ball, ekf, control, refs, noise, trace):
         if controller == 0:
             u, guarded = linearising_control(x_hat, refs[step], k, p)
         else:
-            u = controller_step(y - refs[step, 0], control.u0_v, np.inf, control.lead_lag, xc_next)
+            u = controller_step(y - refs[step, 0], u0, np.inf, xc, Ac, Bc, Cc, Dc, xc_next)
         row = trace[step]
         row[0] = t0 + step * dt
         row[1] = refs[step, 0]
@@ -258,7 +262,7 @@ def run(n_steps, t0, dt, ball, ekf, control, refs, noise, trace):
         x[1] = x_next[1] + sq_v * noise[step, 1]
         x[2] = x_next[2] + sq_i * noise[step, 2]
         if filter_kind == 0:
-            propagate(x_hat, P, u, p, Q, dt, ekf.substeps)
+            propagate(x_hat, P, u, p, Q, dt, substeps)
         else:
             bucy_step(x_hat, P, u, y, p, Q, r if filter_kind == 1 else r * dt, dt)
         if not (np.isfinite(x_hat[0]) and np.isfinite(x_hat[1]) and np.isfinite(x_hat[2])

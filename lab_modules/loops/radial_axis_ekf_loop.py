@@ -16,7 +16,7 @@ T = 50 µs.  Per sample k:
 The plant is always the nonlinear one of eq. 10-12; the filter is either
 ``extended_kalman.ParameterEKF``'s model (§III-A) or ``DisturbanceEKF``'s (§III-B).
 The kernel takes named bundles: ``radial_axis_loop.Rotor``, ``ExtendedFilter``,
-``pid.DiscreteController``, ``Feedback`` and ``radial_axis_loop.Inputs``/``Noise``.
+``pid.DiscreteController``, ``EKFFeedback`` and ``radial_axis_loop.Inputs``/``Noise``.
 """
 
 from __future__ import annotations
@@ -65,7 +65,7 @@ class ExtendedFilter(NamedTuple):
     physics: np.ndarray  # (11,) the filter's ``extended_kalman.physics_vector`` (its own sensor lag T_mx [s])
 
 
-class Feedback(NamedTuple):
+class EKFFeedback(NamedTuple):
     """What the PID acts on, the force feedforward and the amplifier's limit."""
 
     use_estimate: bool           # feed back K_mx x_hat[0] instead of the measured position
@@ -82,7 +82,7 @@ def run(n_steps, rotor, ekf, controller, feedback, inputs, noise, trace):
         the filter's lag is wrong).
     ekf : ``ExtendedFilter``, the filter's model, estimate and covariance (in place).
     controller : ``pid.DiscreteController``, the PID (e [V] -> i_ref [V]).
-    feedback : ``Feedback``, measured or estimated position, feedforward, amplifier limit.
+    feedback : ``EKFFeedback``, measured or estimated position, feedforward, amplifier limit.
     inputs : ``radial_axis_loop.Inputs``, (n_steps,) reference position [m], force f_z [N].
     noise : ``radial_axis_loop.Noise``, (n_steps, 4) standard normal draws scaled by
         (v [m/s], i [A], sensor x [V], sensor i [V]) per sample.
@@ -90,26 +90,30 @@ def run(n_steps, rotor, ekf, controller, feedback, inputs, noise, trace):
 
     Returns (status, steps_done).
     """
-    model, x_hat, P, filter_physics = ekf.model, ekf.x_hat, ekf.P, ekf.physics
-    plant, plant_physics = rotor.state, rotor.physics
-    reference_m, disturbance_n, noise_sigma = inputs.reference_m, inputs.disturbance_n, noise.sigma
+    # every field read once, before the loop: an array read out of a bundle inside the loop
+    # would cost a reference count per sample
+    plant, plant_physics, touchdown_m = rotor.state, rotor.physics, rotor.touchdown_m
+    model, x_hat, P, Q, R_diag, C, filter_physics = ekf.model, ekf.x_hat, ekf.P, ekf.Q, ekf.R_diag, ekf.C, ekf.physics
+    ctrl, Ac, Bc, Cc, Dc = controller.state, controller.A, controller.B, controller.C, controller.D
+    use_estimate, feedforward_v_per_n, u_limit = feedback.use_estimate, feedback.feedforward_v_per_n, feedback.u_limit_v
+    reference_m, disturbance_n, draws, noise_sigma = inputs.reference_m, inputs.disturbance_n, noise.draws, noise.sigma
     T, Tmx, K_mx, K_mi = plant_physics[8], plant_physics[7], plant_physics[9], plant_physics[10]
     y, gain = np.empty(2), np.empty((2, N_STATES))
     F, Phi, work = np.empty((N_STATES, N_STATES)), np.empty((N_STATES, N_STATES)), \
         np.empty((6, N_STATES, N_STATES))
-    work_ctrl = np.empty(max(controller.state.shape[0], 1))
+    work_ctrl = np.empty(max(ctrl.shape[0], 1))
     k1, k2, k3, k4, tmp = np.empty(4), np.empty(4), np.empty(4), np.empty(4), np.empty(4)
     nan = np.nan
     for k in range(n_steps):
         # 1.-2. sensors and filter correction
-        y[0] = K_mx * plant[3] + noise_sigma[2] * noise.draws[k, 2]
-        y[1] = K_mi * plant[2] + noise_sigma[3] * noise.draws[k, 3]
-        nis = ef.update(x_hat, P, ekf.C, y, ekf.R_diag, gain, N_STATES)
+        y[0] = K_mx * plant[3] + noise_sigma[2] * draws[k, 2]
+        y[1] = K_mi * plant[2] + noise_sigma[3] * draws[k, 3]
+        nis = ef.update(x_hat, P, C, y, R_diag, gain, N_STATES)
         # 3.-4. feedback, PID and feedforward
-        fed_back = K_mx * x_hat[0] if feedback.use_estimate else y[0]
+        fed_back = K_mx * x_hat[0] if use_estimate else y[0]
         e = K_mx * reference_m[k] - fed_back
-        feedforward = feedback.feedforward_v_per_n * x_hat[4] if model == ef.NONLINEAR else 0.0
-        u = controller_step(e, feedforward, feedback.u_limit_v, controller, work_ctrl)
+        feedforward = feedforward_v_per_n * x_hat[4] if model == ef.NONLINEAR else 0.0
+        u = controller_step(e, feedforward, u_limit, ctrl, Ac, Bc, Cc, Dc, work_ctrl)
         row = trace[k]
         row[0], row[1], row[2] = plant[0], y[0] / K_mx, x_hat[0]
         row[3], row[4], row[5] = np.sqrt(max(P[0, 0], 0.0)), plant[2], u
@@ -123,7 +127,7 @@ def run(n_steps, rotor, ekf, controller, feedback, inputs, noise, trace):
             row[11], row[12] = x_hat[4], np.sqrt(max(P[4, 4], 0.0))
             row[14], row[15] = x_hat[3], np.sqrt(max(P[3, 3], 0.0))
         # 5. filter prediction (eq. 18 reads the factors from its Phi)
-        ef.predict(model, x_hat, P, u, ekf.Q, filter_physics, F, Phi, work)
+        ef.predict(model, x_hat, P, u, Q, filter_physics, F, Phi, work)
         if model == ef.NONLINEAR:
             row[11], row[14] = ef.factors_from_phi(Phi, filter_physics)
             row[12], row[15] = nan, nan
@@ -131,14 +135,14 @@ def run(n_steps, rotor, ekf, controller, feedback, inputs, noise, trace):
         _rk4_step(plant, u, disturbance_n[k], plant_physics, T, k1, k2, k3, k4, tmp)
         if Tmx <= 0.0:
             plant[3] = plant[0]
-        plant[1] += noise_sigma[0] * noise.draws[k, 0]
-        plant[2] += noise_sigma[1] * noise.draws[k, 1]
+        plant[1] += noise_sigma[0] * draws[k, 0]
+        plant[2] += noise_sigma[1] * draws[k, 1]
         if not (np.isfinite(plant[0]) and np.isfinite(plant[1])):
             return DIVERGED, k + 1
         if not (np.isfinite(x_hat[0]) and np.isfinite(P[0, 0]) and np.isfinite(x_hat[3])
                 and np.isfinite(x_hat[4])):
             return FILTER_DIVERGED, k + 1
-        if abs(plant[0]) >= rotor.touchdown_m:
+        if abs(plant[0]) >= touchdown_m:
             return TOUCHDOWN, k + 1
     return OK, n_steps
 
@@ -321,8 +325,8 @@ class EKFLoopSimulation:
                              C=self._C, physics=self._filter_physics)
         Ac, Bc, Cc, Dc = self._ctrl_matrices
         controller = DiscreteController(state=self.ctrl, A=Ac, B=Bc, C=Cc, D=Dc)
-        feedback = Feedback(use_estimate=setup.use_estimate, feedforward_v_per_n=self._feedforward,
-                            u_limit_v=self._u_limit)
+        feedback = EKFFeedback(use_estimate=setup.use_estimate, feedforward_v_per_n=self._feedforward,
+                               u_limit_v=self._u_limit)
 
         def part(first: int, last: int) -> tuple[int, int]:
             return run(last - first, rotor, ekf, controller, feedback,

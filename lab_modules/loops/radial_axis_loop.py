@@ -138,28 +138,33 @@ def run(n_steps, first_step, rotor, linear_plant, kalman, controller, feedback, 
     -------
     (status, steps_done): status OK, DIVERGED (non-finite) or TOUCHDOWN.
     """
-    plant, physics = rotor.state, rotor.physics
-    x_hat, P = kalman.x_hat, kalman.P
-    state_gain, noise_sigma = feedback.state_gain, noise.sigma
+    # every field read once, before the loop: an array read out of a bundle inside the loop
+    # would cost a reference count per sample
+    plant, physics, touchdown_m = rotor.state, rotor.physics, rotor.touchdown_m
+    nonlinear, plant_A, plant_B_u, plant_B_f = linear_plant.nonlinear, linear_plant.A, linear_plant.B_u, linear_plant.B_f
+    x_hat, P, A_f, B_f, C_f, Q_f, R_diag = kalman.x_hat, kalman.P, kalman.A, kalman.B, kalman.C, kalman.Q, kalman.R_diag
+    ctrl, Ac, Bc, Cc, Dc = controller.state, controller.A, controller.B, controller.C, controller.D
+    use_estimate, state_gain, u_limit = feedback.use_estimate, feedback.state_gain, feedback.u_limit_v
+    reference_m, disturbance_n, draws, noise_sigma = inputs.reference_m, inputs.disturbance_n, noise.draws, noise.sigma
     T, Tmx, K_mx, K_mi = physics[8], physics[7], physics[9], physics[10]
     y = np.empty(2)
     gain = np.empty((2, STATE_SIZE))
     work_x, work_P = np.empty(STATE_SIZE), np.empty((STATE_SIZE, STATE_SIZE))
-    new_plant, work_ctrl = np.empty(4), np.empty(max(controller.state.shape[0], 1))
+    new_plant, work_ctrl = np.empty(4), np.empty(max(ctrl.shape[0], 1))
     k1, k2, k3, k4, tmp = np.empty(4), np.empty(4), np.empty(4), np.empty(4), np.empty(4)
     for k in range(n_steps):
         # 1. sensors
-        y[0] = K_mx * plant[3] + noise_sigma[2] * noise.draws[k, 2]
-        y[1] = K_mi * plant[2] + noise_sigma[3] * noise.draws[k, 3]
+        y[0] = K_mx * plant[3] + noise_sigma[2] * draws[k, 2]
+        y[1] = K_mi * plant[2] + noise_sigma[3] * draws[k, 3]
         # 2. filter correction
-        update(x_hat, P, kalman.C, y, kalman.R_diag, gain, STATE_SIZE)
+        update(x_hat, P, C_f, y, R_diag, gain, STATE_SIZE)
         # 3.-4. feedback and controller
-        fed_back = K_mx * x_hat[0] if feedback.use_estimate else y[0]
-        e = K_mx * inputs.reference_m[k] - fed_back
+        fed_back = K_mx * x_hat[0] if use_estimate else y[0]
+        e = K_mx * reference_m[k] - fed_back
         state_feedback = 0.0
         for j in range(STATE_SIZE):
             state_feedback += state_gain[j] * x_hat[j]
-        u = controller_step(e, -state_feedback, feedback.u_limit_v, controller, work_ctrl)
+        u = controller_step(e, -state_feedback, u_limit, ctrl, Ac, Bc, Cc, Dc, work_ctrl)
         trace[k, 0] = (first_step + k) * T
         trace[k, 1] = plant[0]
         trace[k, 2] = y[0] / K_mx
@@ -170,26 +175,26 @@ def run(n_steps, first_step, rotor, linear_plant, kalman, controller, feedback, 
         trace[k, 7] = plant[1]
         trace[k, 8] = x_hat[1]
         # 5. filter prediction
-        predict(x_hat, P, kalman.A, kalman.B, u, kalman.Q, work_x, work_P)
+        predict(x_hat, P, A_f, B_f, u, Q_f, work_x, work_P)
         # 6. plant
-        f_z = inputs.disturbance_n[k]
-        if linear_plant.nonlinear:
+        f_z = disturbance_n[k]
+        if nonlinear:
             _rk4_step(plant, u, f_z, physics, T, k1, k2, k3, k4, tmp)
         else:
             for r in range(4):
-                acc = linear_plant.B_u[r] * u + linear_plant.B_f[r] * f_z
+                acc = plant_B_u[r] * u + plant_B_f[r] * f_z
                 for c in range(4):
-                    acc += linear_plant.A[r, c] * plant[c]
+                    acc += plant_A[r, c] * plant[c]
                 new_plant[r] = acc
             for r in range(4):
                 plant[r] = new_plant[r]
         if Tmx <= 0.0:
             plant[3] = plant[0]
-        plant[1] += noise_sigma[0] * noise.draws[k, 0]
-        plant[2] += noise_sigma[1] * noise.draws[k, 1]
+        plant[1] += noise_sigma[0] * draws[k, 0]
+        plant[2] += noise_sigma[1] * draws[k, 1]
         if not (np.isfinite(plant[0]) and np.isfinite(plant[1]) and np.isfinite(x_hat[0])
                 and np.isfinite(P[0, 0])):
             return DIVERGED, k + 1
-        if abs(plant[0]) >= rotor.touchdown_m:
+        if abs(plant[0]) >= touchdown_m:
             return TOUCHDOWN, k + 1
     return OK, n_steps

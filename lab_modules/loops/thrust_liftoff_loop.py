@@ -22,7 +22,7 @@ Per sample k:
 The gains are in SI units here (Kp [A/m] ...); the exercise converts the
 paper's A/mm.  The kernel releases the GIL, so browser tabs run in parallel.
 It takes named bundles: ``Collar``, ``CurrentLoop``, the filter's
-``kalman.LinearFilter``, ``LiftoffPID`` and ``Noise``.
+``kalman.LinearFilter``, ``LiftoffPID`` and ``LiftoffNoise``.
 """
 
 from __future__ import annotations
@@ -127,7 +127,7 @@ class LiftoffPID(NamedTuple):
     derivative_from_velocity: bool  # with the estimate: D = −Kd v̂ on the filter's velocity
 
 
-class Noise(NamedTuple):
+class LiftoffNoise(NamedTuple):
     """The noise of one call: standard normal draws and their scales."""
 
     draws: np.ndarray   # (n_steps, 2) standard normal draws for the sensor and the force [-]
@@ -142,14 +142,19 @@ def run(n_steps, first_step, T, collar, current_loop, kalman, pid, noise, trace)
     current_loop : ``CurrentLoop``, G(s) (state in place);
     kalman : ``kalman.LinearFilter``, the filter, padded to ``STATE_SIZE`` (in place);
     pid : ``LiftoffPID``, gains and state (in place);
-    noise : ``Noise`` for the sensor and the force;
+    noise : ``LiftoffNoise`` for the sensor and the force;
     trace (n_steps, 1 + len(KERNEL_COLUMNS)) output.
 
     Returns (status, steps_done)."""
+    # every field read once, before the loop: reading an array out of a bundle in the loop
+    # would count a reference per sample
     plant, constants, memory, clearance_m = collar.state, collar.constants, collar.liftoff, collar.clearance_m
+    nonlinear, plant_A, plant_B_force, gravity_n = collar.nonlinear, collar.A, collar.B_force, collar.gravity_n
     coil, G_A, G_B, G_C, G_D = current_loop.state, current_loop.A, current_loop.B, current_loop.C, current_loop.D
-    x_hat, P, noise_sigma = kalman.x_hat, kalman.P, noise.sigma
-    pid_state, use_estimate = pid.state, pid.use_estimate
+    use_current_loop = current_loop.active
+    x_hat, P, A_f, B_f, C_f, Q_f, R_diag = kalman.x_hat, kalman.P, kalman.A, kalman.B, kalman.C, kalman.Q, kalman.R_diag
+    pid_state, use_estimate, derivative_from_velocity = pid.state, pid.use_estimate, pid.derivative_from_velocity
+    draws, noise_sigma = noise.draws, noise.sigma
     y = np.empty(1)
     gain = np.empty((1, STATE_SIZE))
     work_x, work_P = np.empty(STATE_SIZE), np.empty((STATE_SIZE, STATE_SIZE))
@@ -158,12 +163,12 @@ def run(n_steps, first_step, T, collar, current_loop, kalman, pid, noise, trace)
     max_rest = MAX_REST_S / T
     for k in range(n_steps):
         # 1. sensor, 2. filter correction
-        z = plant[0] + noise_sigma[0] * noise.draws[k, 0]
+        z = plant[0] + noise_sigma[0] * draws[k, 0]
         y[0] = z
-        update(x_hat, P, kalman.C, y, kalman.R_diag, gain, STATE_SIZE)
+        update(x_hat, P, C_f, y, R_diag, gain, STATE_SIZE)
         # 3. feedback, 4. PID
         e = -(x_hat[0] if use_estimate else z)
-        if use_estimate and pid.derivative_from_velocity:
+        if use_estimate and derivative_from_velocity:
             raw_d = -Kd * x_hat[1]
         else:
             raw_d = Kd * (e - pid_state[1]) / T
@@ -174,7 +179,7 @@ def run(n_steps, first_step, T, collar, current_loop, kalman, pid, noise, trace)
         if command == wanted or wanted * e < 0.0:
             pid_state[0] += Ki * T * e
         # 5. current loop
-        if current_loop.active:
+        if use_current_loop:
             i = G_C[0] * coil[0] + G_C[1] * coil[1] + G_D * command
             c0 = G_A[0, 0] * coil[0] + G_A[0, 1] * coil[1] + G_B[0] * command
             c1 = G_A[1, 0] * coil[0] + G_A[1, 1] * coil[1] + G_B[1] * command
@@ -193,15 +198,15 @@ def run(n_steps, first_step, T, collar, current_loop, kalman, pid, noise, trace)
         trace[k, 9] = gain[0, 0]
         trace[k, 10] = x_hat[0] - plant[0]
         # 6. filter prediction with the measured coil current
-        predict(x_hat, P, kalman.A, kalman.B, i, kalman.Q, work_x, work_P)
+        predict(x_hat, P, A_f, B_f, i, Q_f, work_x, work_P)
         # 7. plant and touchdown bearing
-        f_ext = noise_sigma[1] * noise.draws[k, 1] + collar.gravity_n
-        if collar.nonlinear:
+        f_ext = noise_sigma[1] * draws[k, 1] + gravity_n
+        if nonlinear:
             _rk4(plant, i, f_ext, constants, T)
         else:
             force = constants[1] * i + f_ext
-            x_new = collar.A[0, 0] * plant[0] + collar.A[0, 1] * plant[1] + collar.B_force[0] * force
-            v_new = collar.A[1, 0] * plant[0] + collar.A[1, 1] * plant[1] + collar.B_force[1] * force
+            x_new = plant_A[0, 0] * plant[0] + plant_A[0, 1] * plant[1] + plant_B_force[0] * force
+            v_new = plant_A[1, 0] * plant[0] + plant_A[1, 1] * plant[1] + plant_B_force[1] * force
             plant[0], plant[1] = x_new, v_new
         contact = False
         if plant[0] <= -clearance_m:
@@ -346,7 +351,7 @@ class ThrustSimulation:
 
         def part(first: int, last: int) -> tuple[int, int]:
             return run(last - first, self.step + first, b.sample_time_s, collar, current_loop, kf.arrays(), pid,
-                       Noise(draws=noise[first:last], sigma=self._sigma), trace[first:last])
+                       LiftoffNoise(draws=noise[first:last], sigma=self._sigma), trace[first:last])
 
         if n_steps == 1:                               # a single step (the inspector's) keeps the prior
             prior = kf._x.copy(), kf.P.copy()
