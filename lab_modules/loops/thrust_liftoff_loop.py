@@ -293,6 +293,23 @@ class ThrustSimulation:
         resting = b.touchdown_clearance_m - abs(s.start_position_m) <= LIFT_MARGIN_M
         self.memory = np.array([0.0 if resting else 1.0, 0.0])
         self.launched_at = self.step
+        self._bundle()
+
+    def _bundle(self) -> None:
+        """The kernel's bundles over the simulation's arrays, made when those arrays or the
+        settings change (a call of the kernel may cover a fraction of a millisecond)."""
+        s, b, kf = self.setup, self.setup.bearing, self.filter
+        Phi, Gamma = self._plant
+        self._collar = Collar(state=self.plant, constants=self._constants, nonlinear=s.nonlinear, A=Phi,
+                              B_force=Gamma, gravity_n=s.gravity_n, clearance_m=b.touchdown_clearance_m,
+                              liftoff=self.memory)
+        G_A, G_B, G_C, G_D = self._current
+        self._current_loop = CurrentLoop(active=s.current_loop, state=self.coil, A=G_A, B=G_B, C=G_C, D=G_D)
+        self._kalman = kf.arrays()
+        self._pid = LiftoffPID(state=self.pid, proportional_a_per_m=s.proportional_a_per_m,
+                               integral_a_per_m_s=s.integral_a_per_m_s, derivative_a_s_per_m=s.derivative_a_s_per_m,
+                               derivative_filter=self._derivative_filter, current_limit_a=s.current_limit_a,
+                               use_estimate=s.use_estimate, derivative_from_velocity=s.derivative_from_velocity)
 
     def _configure(self):
         s, b = self.setup, self.setup.bearing
@@ -316,6 +333,7 @@ class ThrustSimulation:
         self._configure()
         if not setup.noise_on:
             self._sigma[:] = 0.0
+        self._bundle()
         return self
 
     def advance(self, n_steps: int) -> np.ndarray:
@@ -339,19 +357,11 @@ class ThrustSimulation:
         if s.sensor_noise_correlation_s > 0.0:
             noise[:, 0] = self._colour(noise[:, 0], np.exp(-b.sample_time_s / s.sensor_noise_correlation_s))
         trace = np.empty((n_steps, 1 + len(self.columns)))
-        Phi, Gamma = self._plant
-        collar = Collar(state=self.plant, constants=self._constants, nonlinear=s.nonlinear, A=Phi, B_force=Gamma,
-                        gravity_n=s.gravity_n, clearance_m=b.touchdown_clearance_m, liftoff=self.memory)
-        G_A, G_B, G_C, G_D = self._current
-        current_loop = CurrentLoop(active=s.current_loop, state=self.coil, A=G_A, B=G_B, C=G_C, D=G_D)
-        pid = LiftoffPID(state=self.pid, proportional_a_per_m=s.proportional_a_per_m,
-                         integral_a_per_m_s=s.integral_a_per_m_s, derivative_a_s_per_m=s.derivative_a_s_per_m,
-                         derivative_filter=self._derivative_filter, current_limit_a=s.current_limit_a,
-                         use_estimate=s.use_estimate, derivative_from_velocity=s.derivative_from_velocity)
 
         def part(first: int, last: int) -> tuple[int, int]:
-            return run(last - first, self.step + first, b.sample_time_s, collar, current_loop, kf.arrays(), pid,
-                       LiftoffNoise(draws=noise[first:last], sigma=self._sigma), trace[first:last])
+            return run(last - first, self.step + first, b.sample_time_s, self._collar, self._current_loop,
+                       self._kalman, self._pid, LiftoffNoise(draws=noise[first:last], sigma=self._sigma),
+                       trace[first:last])
 
         if n_steps == 1:                               # a single step (the inspector's) keeps the prior
             prior = kf._x.copy(), kf.P.copy()
