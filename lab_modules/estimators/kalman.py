@@ -21,6 +21,8 @@ matrix inverse.  For each row c of C with variance r::
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 
@@ -122,6 +124,21 @@ def update(x, P, C, y, R_diag, gain, n_states):
     return nis
 
 
+class LinearFilter(NamedTuple):
+    """The arrays of a linear Kalman filter (eq. 1, 2) as the compiled loops take them,
+    padded to ``STATE_SIZE`` states (``KalmanFilter.arrays``).  Units are the model's:
+    states (x [m], v [m/s], i [A], x_d [m]) on the bearing axis, (x [m], v [m/s]) on the
+    thrust collar; measurements y in sensor volts [V] or metres [m]."""
+
+    x_hat: np.ndarray   # (STATE_SIZE,) estimate, corrected and predicted in place [state units]
+    P: np.ndarray       # (STATE_SIZE, STATE_SIZE) error covariance, in place [state unit x state unit]
+    A: np.ndarray       # (STATE_SIZE, STATE_SIZE) discrete state matrix [state unit per state unit]
+    B: np.ndarray       # (STATE_SIZE,) column of the control input u [state unit per unit of u]
+    C: np.ndarray       # (n_y, STATE_SIZE) measurement matrix [unit of y per state unit]
+    Q: np.ndarray       # (STATE_SIZE, STATE_SIZE) process-noise covariance per sample [state units²]
+    R_diag: np.ndarray  # (n_y,) measurement-noise variances [unit of y²]
+
+
 class KalmanFilter:
     """Linear Kalman filter of eq. 2 with a diagonal measurement covariance.
 
@@ -156,6 +173,10 @@ class KalmanFilter:
     def covariance(self) -> np.ndarray:
         """Error covariance P of the estimate (a view)."""
         return self.P[: self.dim_x, : self.dim_x]
+
+    def arrays(self) -> LinearFilter:
+        """The filter's arrays for a compiled loop (the same arrays: the loop updates this filter)."""
+        return LinearFilter(x_hat=self._x, P=self.P, A=self.A, B=self.B, C=self.C, Q=self.Q, R_diag=self.R_diag)
 
     def predict(self, u: float) -> None:
         """Prediction step of eq. 2 with control input u."""

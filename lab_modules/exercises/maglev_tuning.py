@@ -28,7 +28,12 @@ import scipy.stats
 
 from lab_modules import recordings
 from lab_modules.claims import Claim
-from lab_modules.estimators.continuous_discrete_ekf import OBSERVER_COLUMNS, run_observer
+from lab_modules.estimators.continuous_discrete_ekf import (
+    OBSERVER_COLUMNS,
+    ObserverFilter,
+    RecordedSamples,
+    run_observer,
+)
 from lab_modules.estimators.kalman import correction
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, PoleCategory, Series
 from lab_modules.exercises._common import MAGLEV_LAGS, magnet_plant_names
@@ -155,8 +160,9 @@ def observe(rec: recordings.Recording, values: dict) -> dict[str, np.ndarray]:
     Q = filter_q(values)
     out = np.full((len(rec), len(OBSERVER_COLUMNS)), np.nan)
     priors = np.full((len(rec), 12), np.nan)
-    rows = run_observer(rec.time_s, rec.measured_m, rec.coil_voltage_v, x, P0, Q,
-                        sigma**2, TABLE_3_1.constants(), 1, out, priors)
+    rows = run_observer(RecordedSamples(time_s=rec.time_s, measured_m=rec.measured_m, voltage_v=rec.coil_voltage_v),
+                        ObserverFilter(x_hat=x, P=P0, Q=Q, R_m2=sigma**2, constants=TABLE_3_1.constants(), substeps=1),
+                        out, priors)
     columns = {name: out[:, i] for i, name in enumerate(OBSERVER_COLUMNS)}
     columns.update(time_s=rec.time_s, reference_m=rec.reference_m, x_measured_m=rec.measured_m,
                    coil_voltage_v=rec.coil_voltage_v, zero=np.zeros(len(rec)),

@@ -16,6 +16,7 @@ import numpy as np
 import scipy.signal
 
 from lab_modules import analysis
+from lab_modules.controllers.pid import DiscreteController
 from lab_modules.estimators.kalman import KalmanFilter, correction, pad_vector
 from lab_modules.loops import radial_axis_loop
 from lab_modules.plants.radial_bearing import RIG, BearingAxis
@@ -266,15 +267,20 @@ class AxisSimulation:
             reference, state[:] = scipy.signal.lfilter(numerator, denominator, reference, zi=state)
         noise = self.noise(n_steps)
         trace = np.empty((n_steps, len(radial_axis_loop.TRACE_COLUMNS) + 1))
-        kf = self.filter
+        kf, setup = self.filter, self.setup
+        rotor = radial_axis_loop.Rotor(state=self.plant, physics=self._physics, touchdown_m=setup.rig.touchdown_m)
+        A, B_u, B_f = self._plant_linear
+        linear_plant = radial_axis_loop.LinearPlant(nonlinear=setup.nonlinear, A=A, B_u=B_u, B_f=B_f)
+        Ac, Bc, Cc, Dc = self._ctrl_matrices
+        controller = DiscreteController(state=self.ctrl, A=Ac, B=Bc, C=Cc, D=Dc)
+        feedback = radial_axis_loop.Feedback(use_estimate=setup.use_estimate, state_gain=self._state_gain,
+                                             u_limit_v=self._u_limit)
 
         def run(first: int, last: int) -> tuple[int, int]:
             return radial_axis_loop.run(
-                last - first, self.step + first, self.plant, *self._plant_linear, self.setup.nonlinear,
-                self._physics, kf._x, kf.P, kf.A, kf.B, kf.C, kf.Q, kf.R_diag,
-                self.ctrl, *self._ctrl_matrices, self._state_gain, self._u_limit, self.setup.use_estimate,
-                reference[first:last], disturbance[first:last], noise[first:last], self.setup.noise_sigma,
-                self.setup.rig.touchdown_m, trace[first:last])
+                last - first, self.step + first, rotor, linear_plant, kf.arrays(), controller, feedback,
+                radial_axis_loop.Inputs(reference_m=reference[first:last], disturbance_n=disturbance[first:last]),
+                radial_axis_loop.Noise(draws=noise[first:last], sigma=setup.noise_sigma), trace[first:last])
 
         if n_steps == 1:                               # a single step (the inspector's) keeps the prior
             prior = kf._x.copy(), kf.P.copy()
