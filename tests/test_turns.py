@@ -92,10 +92,10 @@ def _readouts(value: str) -> dict:
 
 def test_the_bench_times_a_slider_move_to_its_new_readout():
     tab = Tab("ws://unused", ("Rotor position [µm]",))
-    tab._read_readout(_readouts("0.47"), now=1.0)      # the first readouts: nothing was moved
+    tab.read_readout(_readouts("0.47"), now=1.0)      # the first readouts: nothing was moved
     tab.moved_at = 2.0
-    tab._read_readout(_readouts("0.47"), now=2.1)      # the scope-window rows refreshed: not the answer
-    tab._read_readout(_readouts("0.61"), now=2.3)
-    tab._read_readout(_readouts("0.47"), now=2.5)      # no move pending: no latency
+    tab.read_readout(_readouts("0.47"), now=2.1)      # the scope-window rows refreshed: not the answer
+    tab.read_readout(_readouts("0.61"), now=2.3)
+    tab.read_readout(_readouts("0.47"), now=2.5)      # no move pending: no latency
     assert tab.latencies == [(2.3, pytest.approx(0.3))]
     assert tab.latencies_in(2.0, 3.0) == [pytest.approx(0.3)] and tab.latencies_in(0.0, 2.0) == []

@@ -158,7 +158,7 @@ class Tab:
             if (message["type"] == "GuiUpdateMessage" and message["uuid"] == self.scope_uuid
                     and "data" in message["updates"]):
                 self.scope_times.append(now)
-            self._read_readout(message, now)
+            self.read_readout(message, now)
             if self.breakdown:
                 share = compressed * sizes[index] / total if total else 0.0
                 self.kind_bytes[kind] += share + _binary_bytes(message, lengths)
@@ -166,7 +166,7 @@ class Tab:
         if self.breakdown:
             self.kind_bytes["frame headers and padding"] += len(frame) - compressed - sum(lengths)
 
-    def _read_readout(self, message: dict, now: float) -> None:
+    def read_readout(self, message: dict, now: float) -> None:
         content = (message.get("updates") or message.get("props") or {}).get("_markdown")   # viser's name
         found = READOUT_ROW.search(content) if isinstance(content, str) else None
         if found is None or found.group(1) == self.readout:

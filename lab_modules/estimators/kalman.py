@@ -160,14 +160,14 @@ class KalmanFilter:
         self.A, self.B, self.C = pad_square(A), pad_vector(B), pad_columns(C)
         self.Q, self.P = pad_square(Q), pad_square(P0)
         self.R_diag = np.ascontiguousarray(R_diag, dtype=float).ravel()
-        self._x = pad_vector(x0)
+        self.state = pad_vector(x0)       # the estimate padded to STATE_SIZE, as the compiled steps read it
         self.gain = np.zeros((self.C.shape[0], STATE_SIZE))   # row j: gain of measurement j
         self._work_x, self._work_P = np.zeros(STATE_SIZE), np.zeros((STATE_SIZE, STATE_SIZE))
 
     @property
     def x(self) -> np.ndarray:
         """State estimate (a view of the model's states)."""
-        return self._x[: self.dim_x]
+        return self.state[: self.dim_x]
 
     @property
     def covariance(self) -> np.ndarray:
@@ -176,15 +176,15 @@ class KalmanFilter:
 
     def arrays(self) -> LinearFilter:
         """The filter's arrays for a compiled loop (the same arrays: the loop updates this filter)."""
-        return LinearFilter(x_hat=self._x, P=self.P, A=self.A, B=self.B, C=self.C, Q=self.Q, R_diag=self.R_diag)
+        return LinearFilter(x_hat=self.state, P=self.P, A=self.A, B=self.B, C=self.C, Q=self.Q, R_diag=self.R_diag)
 
     def predict(self, u: float) -> None:
         """Prediction step of eq. 2 with control input u."""
-        predict(self._x, self.P, self.A, self.B, float(u), self.Q, self._work_x, self._work_P)
+        predict(self.state, self.P, self.A, self.B, float(u), self.Q, self._work_x, self._work_P)
 
     def update(self, y) -> None:
         """Correction step of eq. 2 with measurement vector y."""
-        update(self._x, self.P, self.C, np.asarray(y, dtype=float), self.R_diag, self.gain, STATE_SIZE)
+        update(self.state, self.P, self.C, np.asarray(y, dtype=float), self.R_diag, self.gain, STATE_SIZE)
 
 
 def pad_square(M) -> np.ndarray:

@@ -30,7 +30,7 @@ class MarginView(NamedTuple):
 
     readouts: list[tuple[str, float, str]]            # (label, value, unit), as ``Analysis.readouts``
     plots: list[Plot]                                 # |L|, arg L and |S| [dB] with the ISO zone limits
-    notes: list[str]
+    notes: list[str]                                  # what the student reads below the readouts
 
 
 def margin_view(exercise: Exercise, values: dict) -> MarginView:

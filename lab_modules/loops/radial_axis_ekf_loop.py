@@ -10,7 +10,7 @@ T = 50 µs.  Per sample k:
               feedforward (§III-B, after Fig. 4) = -f_z_hat / (k_i K_a): the estimated force
               turned into the current that cancels it, through the rated k_i
 5. filter     prediction with i_ref                                      (eq. 6, 15)
-6. plant      one RK4 sample of eq. 10-12 (``closed_loop._rk4_step``) with the disturbance
+6. plant      one RK4 sample of eq. 10-12 (``radial_axis_loop.rk4_step``) with the disturbance
               force f_z, plus process noise on v and i
 
 The plant is always the nonlinear one of eq. 10-12; the filter is either
@@ -35,7 +35,7 @@ from lab_modules.controllers.pid import DiscreteController, controller_step
 from lab_modules.estimators import extended_kalman as ef
 from lab_modules.estimators.extended_kalman import N_STATES
 from lab_modules.estimators.kalman import correction
-from lab_modules.loops.radial_axis_loop import Inputs, Noise, Rotor, _rk4_step
+from lab_modules.loops.radial_axis_loop import Inputs, Noise, Rotor, rk4_step
 from lab_modules.plants.radial_bearing import RIG, BearingAxis
 
 OK, DIVERGED, TOUCHDOWN, FILTER_DIVERGED = 0, 1, 2, 3
@@ -132,7 +132,7 @@ def run(n_steps, rotor, ekf, controller, feedback, inputs, noise, trace):
             row[11], row[14] = ef.factors_from_phi(Phi, filter_physics)
             row[12], row[15] = nan, nan
         # 6. plant
-        _rk4_step(plant, u, disturbance_n[k], plant_physics, T, k1, k2, k3, k4, tmp)
+        rk4_step(plant, u, disturbance_n[k], plant_physics, T, k1, k2, k3, k4, tmp)
         if Tmx <= 0.0:
             plant[3] = plant[0]
         plant[1] += noise_sigma[0] * draws[k, 0]

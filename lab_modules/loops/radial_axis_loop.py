@@ -101,7 +101,7 @@ def _nonlinear_derivative(s, u, f_z, p, ds):
 
 
 @numba.njit(**JIT)
-def _rk4_step(s, u, f_z, p, T, k1, k2, k3, k4, tmp):
+def rk4_step(s, u, f_z, p, T, k1, k2, k3, k4, tmp):
     """Classical fourth-order Runge-Kutta over one sample, input held (ZOH)."""
     _nonlinear_derivative(s, u, f_z, p, k1)
     for j in range(4):
@@ -179,7 +179,7 @@ def run(n_steps, first_step, rotor, linear_plant, kalman, controller, feedback, 
         # 6. plant
         f_z = disturbance_n[k]
         if nonlinear:
-            _rk4_step(plant, u, f_z, physics, T, k1, k2, k3, k4, tmp)
+            rk4_step(plant, u, f_z, physics, T, k1, k2, k3, k4, tmp)
         else:
             for r in range(4):
                 acc = plant_B_u[r] * u + plant_B_f[r] * f_z

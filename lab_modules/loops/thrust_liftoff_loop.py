@@ -364,7 +364,7 @@ class ThrustSimulation:
                        trace[first:last])
 
         if n_steps == 1:                               # a single step (the inspector's) keeps the prior
-            prior = kf._x.copy(), kf.P.copy()
+            prior = kf.state.copy(), kf.P.copy()
             y = np.array([self.plant[0] + self._sigma[0] * noise[0, 0]])     # eq. 13: Z = x + V
             status, done = part(0, 1)
             self._last_correction = (*prior, y, trace[0, 0])
