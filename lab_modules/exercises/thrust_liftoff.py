@@ -121,9 +121,9 @@ def setup(values: dict, **changes) -> ThrustSetup:
     """The experiment described by the parameter values (the paper's mm read as SI)."""
     si = in_si(PARAMETERS, values)
     s = ThrustSetup(
-        proportional_a_per_m=values["kp_a_per_mm"] / MM,
-        integral_a_per_m_s=values["ki_a_per_mm_s"] / MM,
-        derivative_a_s_per_m=values["kd_a_s_per_mm"] / MM,
+        proportional_a_per_m=si["kp_a_per_mm"],
+        integral_a_per_m_s=si["ki_a_per_mm_s"],
+        derivative_a_s_per_m=si["kd_a_s_per_mm"],
         derivative_filter_s=si["derivative_filter_ms"],
         current_limit_a=values["current_limit_a"],
         use_estimate=values["feedback"] == "estimated",
