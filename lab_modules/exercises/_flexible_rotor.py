@@ -69,8 +69,8 @@ def integrated(sensor_offset_mm: float) -> bool:
 
 def sensor_noise_m(values: dict, sensor_offset_mm: float | None = None) -> float:
     offset = values["sensor_offset_mm"] if sensor_offset_mm is None else sensor_offset_mm
-    key = "capacitive_noise_um" if integrated(offset) else "eddy_current_noise_um"
-    return values[key] * 1e-6
+    sensor = CAPACITIVE_NOISE if integrated(offset) else EDDY_CURRENT_NOISE
+    return sensor.si(values)
 
 
 @lru_cache(maxsize=64)
@@ -89,7 +89,7 @@ def rigid_filter(sensor_lag_s: float, noise_m: float, force_n: float):
 
 def filter_for(values: dict, sensor_offset_mm: float | None = None):
     """``rigid_filter`` for the sensor at this position (default: the values')."""
-    return rigid_filter(values["sensor_lag_us"] * 1e-6, sensor_noise_m(values, sensor_offset_mm),
+    return rigid_filter(SENSOR_LAG.si(values), sensor_noise_m(values, sensor_offset_mm),
                         values["disturbance_force_n"])
 
 

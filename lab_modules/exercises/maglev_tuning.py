@@ -38,7 +38,7 @@ from lab_modules.estimators.kalman import correction
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, PoleCategory, Series
 from lab_modules.exercises._common import MAGLEV_LAGS, magnet_plant_names
 from lab_modules.loops.maglev_loop import MaglevSetup, loop_at_plant_input, preset_q
-from lab_modules.parameters import Parameter, ParameterError
+from lab_modules.parameters import Parameter, ParameterError, in_si
 from lab_modules.plants.maglev_ball import TABLE_3_1
 from lab_modules.scenes.maglev import DRAWN_GAP_MAX_M, Columns, DrawingScale, MaglevScene, exaggeration_for
 
@@ -148,7 +148,9 @@ def drawing_scale(values: dict) -> DrawingScale:
 
 def filter_sigma_m(rec: recordings.Recording, values: dict) -> float:
     """The filter's sensor noise σ [m]: from the still segment (eq. 3.3) or the slider."""
-    return sensor_noise_m(rec, values) if values["r_source"] == "estimated" else values["filter_sensor_noise_mm"] * 1e-3
+    if values["r_source"] == "estimated":
+        return sensor_noise_m(rec, values)
+    return in_si(PARAMETERS, values)["filter_sensor_noise_mm"]
 
 
 def observe(rec: recordings.Recording, values: dict) -> dict[str, np.ndarray]:
@@ -283,9 +285,7 @@ class MaglevTuning(Exercise):
         rec = recording(values)
         return {"states": ["x1 gap [m]", "x2 velocity [m/s]", "x3 current [A]"], "inputs": ["u coil [V]"],
                 "outputs": ["x1 [m]"], "plant": "eq. 2.10, Table 3.1", "filter": "continuous-discrete EKF",
-                "Q": filter_q(values).tolist(), "R": (sensor_noise_m(rec, values) ** 2
-                                                       if values["r_source"] == "estimated"
-                                                       else (values["filter_sensor_noise_mm"] * 1e-3) ** 2),
+                "Q": filter_q(values).tolist(), "R": filter_sigma_m(rec, values) ** 2,
                 "P0": (values["initial_covariance"] * np.eye(3)).tolist(),
                 "recording": rec.name, "recording_rows": len(rec), "recording_metadata": rec.metadata}
 

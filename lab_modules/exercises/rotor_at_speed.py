@@ -66,7 +66,7 @@ from lab_modules.loops.spinning_rotor_loop import (
     unbalance_response,
     unbalance_states,
 )
-from lab_modules.parameters import Parameter
+from lab_modules.parameters import Parameter, in_si
 from lab_modules.plants.flexible_rotor import THEORIES, FlexibleRotor
 from lab_modules.plants.radial_bearing import RIG
 from lab_modules.plants.spinning_rotor import (
@@ -160,7 +160,7 @@ def _plant_and_grid(theory: str, modal_damping: float, sensor_offset_mm: float, 
 def plant_and_grid(values: dict, sensor_offset_mm: float | None = None):
     offset = values["sensor_offset_mm"] if sensor_offset_mm is None else sensor_offset_mm
     return _plant_and_grid(values["beam_theory"], values["modal_damping_percent"] / 100, float(offset),
-                           int(values["modes"]), values["sensor_lag_us"] * 1e-6)
+                           int(values["modes"]), in_si(PARAMETERS, values)["sensor_lag_us"])
 
 
 def compensator(values: dict, sensor_offset_mm: float | None = None, gain_factor: float | None = None):
@@ -387,7 +387,7 @@ class RotorAtSpeed(Exercise):
         criticals.sort()
         response = unbalance_response(closed, unbalance_kg_m(values))
         response_here = unbalance_response(loop(values, [speed]), unbalance_kg_m(values))[0]
-        clearance = values["clearance_um"] * 1e-6
+        clearance = in_si(PARAMETERS, values)["clearance_um"]
         bearing_here = abs(response_here[LOOP_OUTPUTS.index("r_bearing_m")])
         offset = values["sensor_offset_mm"]
         readouts = [("Speed n", speed, "rpm"), ("Spin frequency n / 60", speed / 60, "Hz"),
@@ -461,7 +461,7 @@ class RotorAtSpeed(Exercise):
         return RunUpSimulation(plant, compensator(values), values["speed_rpm"], values["run_up_rpm_per_s"],
                                unbalance_kg_m(values), values["disturbance_force_n"],
                                (K_MX * sensor_noise_m(values), K_MI * CURRENT_NOISE_A), seed=int(values["seed"]),
-                               clearance_m=values["clearance_um"] * 1e-6,
+                               clearance_m=in_si(PARAMETERS, values)["clearance_um"],
                                watched_row=rotor_of(values).rotor.displacement(MIDSPAN_M, int(values["modes"]))[0],
                                explain=explain)
 
@@ -507,7 +507,7 @@ class RotorAtSpeed(Exercise):
             CAMPBELL_SPEEDS_RPM, sweep(closed).whirl_hz[:, j, 1]))
         sim = self.simulation(values)
         trace = sim.advance(round(duration_s / RIG.sample_time_s))
-        clearance = values["clearance_um"] * 1e-6
+        clearance = in_si(PARAMETERS, values)["clearance_um"]
         return {
             "speeds_rpm": CAMPBELL_SPEEDS_RPM.tolist(),
             "beam_theory": values["beam_theory"],

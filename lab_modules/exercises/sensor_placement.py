@@ -73,7 +73,7 @@ from lab_modules.loops.flexible_rotor_loop import (
     kalman_compensator,
     pid_compensator,
 )
-from lab_modules.parameters import Parameter
+from lab_modules.parameters import Parameter, in_si
 from lab_modules.plants.flexible_rotor import FlexibleRotor, modal_plant
 from lab_modules.plants.radial_bearing import RIG
 from lab_modules.scenes.rotor import RotorScene
@@ -134,7 +134,7 @@ def compensator(values: dict, gain_factor: float | None = None,
 def plant(values: dict, sensor_offset_mm: float | None = None) -> control.StateSpace:
     offset = values["sensor_offset_mm"] if sensor_offset_mm is None else sensor_offset_mm
     return _plant(values["modal_damping_percent"] / 100, float(offset), int(values["modes"]),
-                  values["sensor_lag_us"] * 1e-6)
+                  in_si(PARAMETERS, values)["sensor_lag_us"])
 
 
 def loop_at_plant_input(values: dict) -> control.StateSpace:
@@ -195,8 +195,9 @@ def plant_mode_names(values: dict, poles_s: np.ndarray) -> list[str | None]:
     one real pole each (the plant is block triangular)."""
     n = int(values["modes"])
     r = rotor(values["modal_damping_percent"] / 100)
-    lag = values["sensor_lag_us"] * 1e-6
-    A = np.asarray(modal_plant(r, GEOMETRY.bearing_m + values["sensor_offset_mm"] * 1e-3, n, lag).A)
+    si = in_si(PARAMETERS, values)
+    lag = si["sensor_lag_us"]
+    A = np.asarray(modal_plant(r, GEOMETRY.bearing_m + si["sensor_offset_mm"], n, lag).A)
     s, vectors = np.linalg.eig(A[:2 * n, :2 * n])
     omega = 2 * np.pi * r.natural_frequencies_hz(n)
     energy = np.abs(vectors[:n]) ** 2 * (omega[:, None] ** 2 + np.abs(s)[None, :] ** 2)
@@ -286,7 +287,7 @@ def pole_paths(values: dict) -> np.ndarray:
 def step_response(values: dict, duration_s: float = 0.03):
     """Reference step (``reference_step_um``, or 50 µm if zero) of the noise-free loop:
     time [s], rotor at the bearing [m], sensor reading [m]; cut at touchdown."""
-    step_m = (values["reference_step_um"] or 50.0) * 1e-6
+    step_m = in_si(PARAMETERS, values)["reference_step_um"] or 50.0 * 1e-6
     response = control.step_response(loop(values), T=np.arange(0.0, duration_s, T), input=0)
     outputs = np.asarray(response.outputs).reshape(len(LOOP_OUTPUTS), -1) * step_m
     bearing = outputs[LOOP_OUTPUTS.index("x_bearing_m")]
@@ -301,7 +302,8 @@ def step_response(values: dict, duration_s: float = 0.03):
 
 def simulation_inputs(values: dict):
     """Square-wave reference (first half of each period zero); no deterministic force."""
-    step_m, period_s = values["reference_step_um"] * 1e-6, values["step_period_ms"] * 1e-3
+    si = in_si(PARAMETERS, values)
+    step_m, period_s = si["reference_step_um"], si["step_period_ms"]
 
     def inputs(first_step: int, n_steps: int):
         t = (first_step + np.arange(n_steps)) * T
@@ -392,8 +394,9 @@ class SensorPlacement(Exercise):
     def model(self, values: dict) -> dict:
         r = rotor(values["modal_damping_percent"] / 100)
         n = int(values["modes"])
-        z_s = GEOMETRY.bearing_m + values["sensor_offset_mm"] * 1e-3
-        continuous = modal_plant(r, z_s, n, values["sensor_lag_us"] * 1e-6)
+        si = in_si(PARAMETERS, values)
+        z_s = GEOMETRY.bearing_m + si["sensor_offset_mm"]
+        continuous = modal_plant(r, z_s, n, si["sensor_lag_us"])
         discrete = plant(values)
         return {
             "states": [f"eta_{j + 1} [m·kg^0.5]" for j in range(n)] + [f"eta_{j + 1}' [m·kg^0.5/s]" for j in range(n)]
@@ -441,9 +444,10 @@ class SensorPlacement(Exercise):
                   "(mode 1 is the rigid tilting about the ball bearing).")]
         if not stable(closed):
             notes.insert(0, f"Unstable: {unstable_mode_sentence(modes_s)}.")
+        si = in_si(PARAMETERS, values)
         poles = {"open-loop plant": np.linalg.eigvals(np.asarray(
-                     modal_plant(r, GEOMETRY.bearing_m + values["sensor_offset_mm"] * 1e-3, n,
-                                 values["sensor_lag_us"] * 1e-6).A)),
+                     modal_plant(r, GEOMETRY.bearing_m + si["sensor_offset_mm"], n,
+                                 si["sensor_lag_us"]).A)),
                  "closed loop": continuous_poles(closed)}
         return Analysis(readouts, poles, notes=notes, plots=self._plots(values))
 

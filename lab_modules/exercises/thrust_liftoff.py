@@ -45,7 +45,7 @@ from lab_modules.loops.thrust_liftoff_loop import (
     linear_loop,
     loop_at_plant_input,
 )
-from lab_modules.parameters import Parameter
+from lab_modules.parameters import Parameter, in_si
 from lab_modules.plants.thrust_bearing import TABLE_1
 from lab_modules.scenes.thrust_bearing import ThrustBearingScene
 
@@ -119,23 +119,24 @@ PARAMETERS = (
 
 def setup(values: dict, **changes) -> ThrustSetup:
     """The experiment described by the parameter values (the paper's mm read as SI)."""
+    si = in_si(PARAMETERS, values)
     s = ThrustSetup(
-        proportional_a_per_m=values["kp_a_per_mm"] / MM,
-        integral_a_per_m_s=values["ki_a_per_mm_s"] / MM,
-        derivative_a_s_per_m=values["kd_a_s_per_mm"] / MM,
-        derivative_filter_s=values["derivative_filter_ms"] * 1e-3,
+        proportional_a_per_m=si["kp_a_per_mm"],
+        integral_a_per_m_s=si["ki_a_per_mm_s"],
+        derivative_a_s_per_m=si["kd_a_s_per_mm"],
+        derivative_filter_s=si["derivative_filter_ms"],
         current_limit_a=values["current_limit_a"],
         use_estimate=values["feedback"] == "estimated",
         derivative_from_velocity=values["derivative_source"] == "velocity",
         current_loop=values["current_loop"] == "on",
         nonlinear=values["force_law"] == "nonlinear",
         vertical=values["orientation"] == "vertical",
-        sensor_noise_m=values["sensor_noise_um"] * 1e-6,
-        sensor_noise_correlation_s=values["noise_correlation_ms"] * 1e-3,
+        sensor_noise_m=si["sensor_noise_um"],
+        sensor_noise_correlation_s=si["noise_correlation_ms"],
         force_noise_n=values["force_noise_n"],
         filter_q_n2=values["filter_q_n2"],
         filter_r_factor=values["filter_r_factor"],
-        start_position_m=values["start_position_mm"] * MM)
+        start_position_m=si["start_position_mm"])
     return replace(s, **changes)
 
 
