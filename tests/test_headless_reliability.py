@@ -26,7 +26,7 @@ def test_bench_seconds_out_of_range_is_one_line(capsys, seconds):
 def test_data_from_a_fifo_is_refused_not_waited_for(tmp_path, capsys):
     fifo = tmp_path / "pipe.csv"
     os.mkfifo(fifo)
-    assert "not a regular file" in _one_line_error(capsys, ["run", "maglev_tuning", "--data", str(fifo)])
+    assert "is a pipe or socket" in _one_line_error(capsys, ["run", "maglev_tuning", "--data", str(fifo)])
 
 
 @pytest.mark.parametrize("text", ["١٠", "１０", "1_0", "+1_0.5"])

@@ -107,8 +107,9 @@ def read_data_file(exercise, path) -> tuple[str, bytes] | None:
     if exercise.data_description is None:
         raise ParameterError(f"exercise {exercise.name!r} takes no --data file")
     try:
-        if not stat.S_ISREG(os.stat(path).st_mode):       # a FIFO or a device would block or never end
-            raise ParameterError(f"--data {path!r} is not a regular file")
+        mode = os.stat(path).st_mode
+        if stat.S_ISFIFO(mode) or stat.S_ISSOCK(mode):     # would wait for a writer that may never come
+            raise ParameterError(f"--data {path!r} is a pipe or socket, not a file")
         with open(path, "rb") as handle:
             content = handle.read(MAX_BYTES + 1)
     except OSError as error:
