@@ -1,7 +1,7 @@
-"""The upload policy of app/infra/traffic.py: one unfinished upload per tab, a budget per process,
+"""The upload policy of app/infra/uploads.py: one unfinished upload per tab, a budget per process,
 stale uploads dropped."""
 
-from app.infra.traffic import UPLOAD_STALE_S, Uploads
+from app.infra.uploads import UPLOAD_STALE_S, Uploads
 
 
 def test_a_new_upload_replaces_the_tabs_unfinished_one():
@@ -32,3 +32,4 @@ def test_stale_uploads_are_dropped_and_overflow_ends_an_upload():
     assert accepted and dropped == [(1, "a")]                 # silent since it began; b sent a part lately
     assert uploads.part(2, "b", 25, now=UPLOAD_STALE_S) == "overflow"
     assert uploads.of_client(2) == [] and uploads.of_client(3) == [(3, "c")]
+

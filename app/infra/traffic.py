@@ -9,11 +9,8 @@ and hands every one to its handlers (GUI updates become thread-pool jobs).
   none in the last ``COALESCE_S``; otherwise only the newest value is kept and
   passed on when that interval is over.  A burst of 10,000 slider updates
   costs their decoding and one dispatch per control per interval;
-- **checks uploads** (``Uploads``): a declared size above ``MAX_UPLOAD_BYTES`` is refused
-  before any part is accepted, and parts beyond the declared size are dropped; a tab has at
-  most one unfinished upload (a new one drops the older), the unfinished uploads of the whole
-  process may declare at most ``UPLOAD_BUDGET_BYTES``, and one that sends no part for
-  ``UPLOAD_STALE_S`` is dropped (its parts are freed);
+- **checks uploads** against ``uploads.Uploads`` (a size limit per file, one unfinished upload
+  per tab, a budget per process, stale uploads dropped and their parts freed);
 - **answers invalid messages** (undecodable, or rejected by a handler) in the
   tab through ``Traffic.report`` and logs one line per client, not per message;
   a GUI update may only change a control's ``value`` (what a browser sends: a
@@ -36,7 +33,6 @@ import sys
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import msgspec
 import viser
@@ -44,15 +40,11 @@ import viser.infra._infra as infra
 from viser import _messages
 from viser.infra._async_message_buffer import AsyncMessageBuffer
 
+from app.infra import viser_internals
+from app.infra.uploads import MAX_UPLOAD_BYTES, Uploads, describe_bytes
+
 #: A control's updates are acted on at most once per this interval [s] (newest value wins).
 COALESCE_S = 0.02
-#: Largest upload accepted (the recordings' limit).
-MAX_UPLOAD_BYTES = 20_000_000
-#: What the unfinished uploads of one process may declare together (five of the largest at once).
-UPLOAD_BUDGET_BYTES = 100_000_000
-#: An unfinished upload that sends no part for this long is dropped [s] (a browser sends every
-#: part at once: 20 MB take 16 s on a 10 Mbit/s link).
-UPLOAD_STALE_S = 30.0
 #: Share of the event loop one connection's messages may take, and the burst it may take at once [s].
 LOOP_SHARE = 0.05
 LOOP_BURST_S = 0.02
@@ -63,66 +55,6 @@ MESSAGE_COST_S = 20e-6
 YIELD_EVERY = 32
 #: Invalid messages from one client beyond this many are not reported again in its tab.
 REPORTS_PER_CLIENT = 5
-
-
-@dataclass
-class Transfer:
-    """One unfinished upload: bytes declared and received, and when its last part came [s]."""
-
-    declared: int
-    received: int = 0
-    last_part: float = 0.0
-
-
-class Uploads:
-    """The unfinished uploads of one process, by (client id, transfer uuid): at most one per tab,
-    at most ``budget`` bytes declared in all, none idle longer than ``stale_s``."""
-
-    def __init__(self, budget: int = UPLOAD_BUDGET_BYTES, stale_s: float = UPLOAD_STALE_S):
-        self.budget, self.stale_s = budget, stale_s
-        self.transfers: dict[tuple, Transfer] = {}
-
-    def reserved(self) -> int:
-        return sum(t.declared for t in self.transfers.values())
-
-    def start(self, client_id, transfer: str, declared: int, now: float) -> tuple[bool, list[tuple]]:
-        """A tab starts an upload: whether it is accepted, and the (client, transfer) pairs dropped
-        for it (the tab's older unfinished upload, stale ones), whose parts must be freed."""
-        dropped = [key for key in self.transfers if key[0] == client_id] + self.stale(now)
-        for key in dropped:
-            self.transfers.pop(key, None)
-        accepted = self.reserved() + declared <= self.budget
-        if accepted:
-            self.transfers[(client_id, transfer)] = Transfer(declared, 0, now)
-        return accepted, dropped
-
-    def part(self, client_id, transfer: str, size: int, now: float) -> str | None:
-        """A part arrived: "more" (pass it on), "done" (pass it on, the upload is complete),
-        "overflow" (beyond the declared size: the upload is dropped) or None (not a transfer
-        in progress: ignore it)."""
-        key = (client_id, transfer)
-        current = self.transfers.get(key)
-        if current is None:
-            return None
-        if current.received + size > current.declared:
-            del self.transfers[key]
-            return "overflow"
-        current.received += size
-        current.last_part = now
-        if current.received == current.declared:
-            del self.transfers[key]
-            return "done"
-        return "more"
-
-    def stale(self, now: float) -> list[tuple]:
-        return [key for key, t in self.transfers.items() if now - t.last_part > self.stale_s]
-
-    def drop(self, keys) -> None:
-        for key in keys:
-            self.transfers.pop(key, None)
-
-    def of_client(self, client_id) -> list[tuple]:
-        return [key for key in self.transfers if key[0] == client_id]
 
 
 class Traffic:
@@ -184,8 +116,7 @@ class Traffic:
             return "malformed GUI update"
         if set(message.updates) != {"value"}:
             return "a change of a control the browser never sends"
-        client = self.server._connected_clients.get(client_id)
-        handle = getattr(client, "gui", self.server.gui)._gui_input_handle_from_uuid.get(message.uuid)
+        handle = viser_internals.gui_input_handle(self.server, client_id, message.uuid)
         if isinstance(handle, viser.GuiDropdownHandle) and message.updates["value"] not in handle.options:
             return "a choice the control does not offer"
         return None
@@ -196,10 +127,7 @@ class Traffic:
         self.uploads.drop(keys)
         for client_id, transfer in keys:
             self.stats["dropped_uploads"] += 1
-            client = self.server._connected_clients.get(client_id)
-            for gui in (self.server.gui, getattr(client, "gui", None)):
-                if gui is not None:
-                    gui._current_file_upload_states.pop(transfer, None)
+            viser_internals.forget_upload(self.server, client_id, transfer)
 
     def sweep_uploads(self) -> None:
         """Drop stale uploads, and look again while any upload is unfinished (on the event loop)."""
@@ -262,10 +190,6 @@ async def _guarded_dispatch(self, client_id, message) -> None:
         if _installed is None:
             raise
         _installed.invalid(client_id, f"{type(message).__name__}: {type(error).__name__} {str(error)[:80]}")
-
-
-def _describe_bytes(size: float) -> str:
-    return f"{size / 1e6:.1f} MB"
 
 
 class _Header(msgspec.Struct):
@@ -352,8 +276,8 @@ async def _consumer(websocket, handle_message: Callable, message_class) -> None:
             if declared > MAX_UPLOAD_BYTES:
                 traffic.stats["refused_uploads"] += 1
                 if client_id is not None:
-                    traffic.report_to_tab(client_id, f"The file is {_describe_bytes(declared)}; the largest "
-                                                     f"accepted is {_describe_bytes(MAX_UPLOAD_BYTES)}.")
+                    traffic.report_to_tab(client_id, f"The file is {describe_bytes(declared)}; the largest "
+                                                     f"accepted is {describe_bytes(MAX_UPLOAD_BYTES)}.")
                 return
             accepted, dropped = traffic.uploads.start(client_id, message.transfer_uuid, declared, loop.time())
             traffic.free_uploads(dropped)
