@@ -259,6 +259,30 @@ def test_class_tokens_come_from_flag_file_or_environment(tmp_path):
     assert token_matches(generated, generated.replace("-", " ").upper()) and token_bits("kalman42") < 50
 
 
+
+@pytest.mark.parametrize("host, given, expected", [("0.0.0.0", None, "generated"), ("127.0.0.1", None, None),
+                                                   ("0.0.0.0", "kalman42", "from --token")])
+def test_a_token_is_generated_off_loopback_and_a_weak_one_is_warned_of(monkeypatch, host, given, expected):
+    """Off loopback with no token given the server makes one (never an open lab); a chosen token
+    short enough to guess gets a warning, and --token the note that the process list shows it."""
+    import argparse
+
+    from app.infra.access import TOKEN_VARIABLE
+    from app.server import Settings
+    monkeypatch.delenv(TOKEN_VARIABLE, raising=False)
+    args = argparse.Namespace(host=host, port=8080, exercise="kalman_noise", data_dir=None, token=given,
+                              token_file=None, allow_origin=[], max_tabs="60", trusted_proxy=[])
+    settings = Settings.from_args(args)
+    assert settings.token_source == (expected or "")
+    lines = " ".join(settings.token_lines())
+    if expected is None:
+        assert settings.token is None and lines == ""
+    elif expected == "generated":
+        assert re.fullmatch(r"[a-z2-9]{4}-[a-z2-9]{4}-[a-z2-9]{4}", settings.token)
+        assert "generated" in lines and "warning" not in lines
+    else:
+        assert settings.token == "kalman42" and "can be guessed" in lines and "process list" in lines
+
 def test_old_short_codes_keep_opening(tmp_path):
     """Codes made before the longer ones (two letters and four characters) open as before."""
     store = Store(tmp_path)
