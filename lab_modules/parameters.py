@@ -11,7 +11,7 @@ import math
 import re
 from collections.abc import Iterable
 from dataclasses import dataclass
-from functools import cache
+from functools import cache, cached_property
 
 
 class ParameterError(ValueError):
@@ -113,9 +113,10 @@ class Parameter:
             return int(number)
         return number
 
-    @property
+    @cached_property
     def numeric(self) -> bool:
-        """A number, or a choice among numbers (their texts, e.g. "-0.5" mm)."""
+        """A number, or a choice among numbers (their texts, e.g. "-0.5" mm); kept, as ``in_si``
+        asks it of every control each time an exercise builds its set-up."""
         return all(_is_number(choice) for choice in self.choices)
 
     def si(self, values: dict) -> float:

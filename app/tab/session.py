@@ -56,7 +56,11 @@ from app.tab.worker import TabClosed, TabWorker
 from lab_modules.exercises import Exercise, registry
 from lab_modules.parameters import Parameter, ParameterError
 
-SETTLE_BEFORE_REMOVAL_S = 0.3     # an exercise switch waits this long between the last chart update and removal
+#: An exercise switch waits this long between the last chart update and the removals: a busy browser
+#: (a slow laptop; Chromium with its CPU slowed fourfold in the tests) gathers the messages of a long
+#: frame into one batch, and 0.3 s was not always enough there.  (A render request would be an exact
+#: barrier, but a browser whose 3D canvas has no size logs an error answering it.)
+SETTLE_BEFORE_REMOVAL_S = 1.0
 FULL = ("### The lab is full\n\nEvery place on this lab server is taken. This tab enters by itself as soon "
         "as a place is free; or try again in a minute, or ask your instructor.")
 
