@@ -1,0 +1,228 @@
+"""The filter debugger: while paused, the filter's kept history (``lab_modules.estimators.filter_history``)
+sample by sample: step back and forward or jump with the scrubber, the sample's predict and update
+typeset with its numbers, the 1σ/2σ/3σ ellipses of P⁻ and P⁺ for two states around the estimates
+and the true state, NEES/NIS over a chosen window with 95 % χ² bounds, and a branch (the filter
+rerun from the shown sample with Q or R scaled, on the same measurements).
+
+Shown for every simulation that offers ``filter_tape()`` (see ``exercises.Simulation``); nothing
+is computed while the simulation runs."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import viser
+
+from app.panels import scope
+from app.panels.typeset import typeset
+from lab_modules.estimators.filter_consistency import consistency
+from lab_modules.estimators.filter_history import FilterHistory, branch
+from lab_modules.formatting import number
+
+RUNNING_NOTE = "*Pause the simulation to step back through the filter's last samples.*"
+SIGMAS = (1, 2, 3)
+PRIOR_COLOUR, POSTERIOR_COLOUR, TRUTH_COLOUR = "#1f77b4", "#d62728", "#2ca02c"
+GRID = 121                        # x points per ellipse half
+DIGITS = 4
+
+
+def available(simulation) -> bool:
+    return callable(getattr(simulation, "filter_tape", None))
+
+
+def latex_number(value: float) -> str:
+    """``value`` in LaTeX, 4 significant digits, powers of ten as ×10ⁿ."""
+    if not math.isfinite(value):
+        return r"\text{n/a}"
+    exponent = 0 if value == 0 else math.floor(math.log10(abs(value)))
+    if -2 <= exponent <= 3:
+        return number(value, DIGITS).replace("−", "-")
+    return rf"{number(value / 10**exponent, DIGITS).replace('−', '-')}\times 10^{{{exponent}}}"
+
+
+def column(values) -> str:
+    return r"\begin{bmatrix}" + r"\\".join(latex_number(v) for v in np.ravel(values)) + r"\end{bmatrix}"
+
+
+def matrix(values) -> str:
+    rows = np.atleast_2d(values)
+    return r"\begin{bmatrix}" + r"\\".join("&".join(latex_number(v) for v in row) for row in rows) + r"\end{bmatrix}"
+
+
+def equations(history: FilterHistory, row: int) -> str:
+    """The sample's prediction and correction (eq. 2) with its numbers, in SI units."""
+    s = history.sample(row)
+    sigma_prior, sigma_post = np.sqrt(np.diag(s["P_prior"])), np.sqrt(np.diag(s["P_post"]))
+    units = ", ".join(unit for _, unit in history.model.states)
+    return typeset("\n\n".join([
+        f"**Sample {s['sample']}**, t = {s['time_s'] * 1e3:.3f} ms (states in {units}):",
+        r"$$\hat{x}^- = \Phi\hat{x}^+_{k-1} + \Gamma u_{k-1} = " + column(s["x_prior"]) + "$$",
+        r"$$\sigma^- = \sqrt{\mathrm{diag}(\Phi P^+\Phi^T + Q)} = " + column(sigma_prior) + "$$",
+        r"$$S = H P^- H^T + R = " + matrix(s["S"]) + "$$",
+        r"$$K = P^- H^T S^{-1} = " + matrix(s["K"]) + "$$",
+        r"$$\nu = y - H\hat{x}^- = " + column(s["y"]) + " - " + column(history.model.H @ s["x_prior"])
+        + " = " + column(s["innovation"]) + "$$",
+        r"$$\hat{x}^+ = \hat{x}^- + K\nu = " + column(s["x_post"]) + r",\quad \sigma^+ = " + column(sigma_post)
+        + "$$",
+        r"$$\text{true } x = " + column(s["truth"]) + "$$"]))
+
+
+def ellipse(centre, P2, sigmas: float, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Upper and lower halves of (z − c)ᵀ P⁻¹ (z − c) = sigmas² over ``x`` (NaN outside)."""
+    a, b, c = P2[0, 0], P2[0, 1], P2[1, 1]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        dx = x - centre[0]
+        # z = (dx, dy): c dx² − 2 b dx dy + a dy² = sigmas² (a c − b²), solved for dy
+        root = np.sqrt((b * b - a * c) * dx * dx + a * sigmas**2 * (a * c - b * b))
+        return centre[1] + (b * dx + root) / a, centre[1] + (b * dx - root) / a
+
+
+def ellipse_chart(history: FilterHistory, row: int, pair: tuple[int, int]) -> tuple[tuple, dict]:
+    """uPlot data and options: the ellipses of P⁻ (blue) and P⁺ (red) for states ``pair``,
+    x̂⁻, x̂⁺ and the true state as points."""
+    i, j = pair
+    s = history.sample(row)
+    cut = np.ix_(pair, pair)
+    prior, post = s["x_prior"][list(pair)], s["x_post"][list(pair)]
+    truth = s["truth"][list(pair)]
+    half = 3.05 * max(math.sqrt(s["P_prior"][i, i]), math.sqrt(s["P_post"][i, i]))
+    points = [p for p in (prior[0], post[0], truth[0]) if math.isfinite(p)]
+    x = np.unique(np.concatenate([np.linspace(min(points) - half, max(points) + half, GRID), points]))
+    series, data = [viser.uplot.Series(label=history.model.states[i][0])], [x]
+    for name, centre, P, colour in (("P⁻", prior, s["P_prior"][cut], PRIOR_COLOUR),
+                                    ("P⁺", post, s["P_post"][cut], POSTERIOR_COLOUR)):
+        for sigmas in SIGMAS:
+            upper, lower = ellipse(centre, P, sigmas, x)
+            for half_name, values in (("", upper), (" ", lower)):
+                data.append(values)
+                dashed = {"dash": (4.0, 4.0)} if sigmas > 1 else {}
+                series.append(viser.uplot.Series(label=f"{sigmas}σ {name}{half_name}", stroke=colour,
+                                                 width=2.0 if sigmas == 1 else 1.0, **dashed,
+                                                 points=viser.uplot.Series_Points(show=False)))
+    for label, point, colour in (("x̂⁻", prior, PRIOR_COLOUR), ("x̂⁺", post, POSTERIOR_COLOUR),
+                                 ("true x", truth, TRUTH_COLOUR)):
+        values = np.where(x == point[0], point[1], np.nan)
+        data.append(values)
+        series.append(viser.uplot.Series(label=label, stroke=colour, width=0,
+                                         points=viser.uplot.Series_Points(show=True, size=9, fill=colour,
+                                                                          stroke=colour)))
+    finite = np.concatenate([d[np.isfinite(d)] for d in data[1:]])
+    low, high = float(finite.min()), float(finite.max())
+    margin = 0.05 * (high - low) or abs(high) or 1.0
+    (_, x_unit), (y_label, y_unit) = history.model.states[i], history.model.states[j]
+    return tuple(data), {
+        "series": tuple(series), "title": f"P⁻ and P⁺ at sample {s['sample']}: 1σ, 2σ, 3σ",
+        "legend": viser.uplot.Legend(show=False), "padding": scope.PADDING,
+        "axes": (viser.uplot.Axis(label=f"{history.model.states[i][0]} [{x_unit}]"),
+                 viser.uplot.Axis(label=f"{y_label} [{y_unit}]", size=70)),
+        "scales": {"x": viser.uplot.Scale(time=False, auto=False, min=float(x[0]), max=float(x[-1])),
+                   "y": viser.uplot.Scale(auto=False, min=low - margin, max=high + margin)}}
+
+
+def consistency_text(history: FilterHistory, row: int, window: int) -> str:
+    """NEES and NIS over the ``window`` samples up to the shown one, naming a filter outside its bounds."""
+    shown = history.rows(max(0, row + 1 - window), row + 1)
+    lines = [f"Consistency over the {len(shown)} samples up to {history.first_sample + row} (95 % χ² bounds):", "",
+             "| test | mean | bounds | independent samples | verdict |", "|---|---:|---:|---:|---|"]
+    for test in consistency(shown):
+        verdict = "inside" if test.inside else f"**outside: {history.model.title} is {test.verdict}**"
+        lines.append(f"| {test.name} ({test.dof} dof) | {number(test.mean, 3)} | {number(test.lower, 3)} … "
+                     f"{number(test.upper, 3)} | {test.independent_samples} | {verdict} |")
+    return "\n".join(lines)
+
+
+class FilterDebugger:
+    """The "Filter debugger" folder: scrubber, step buttons, equations, ellipses, consistency, branch."""
+
+    def __init__(self, gui, states: tuple[tuple[str, str], ...], on):
+        """``on(name, function)`` makes a GUI callback of ``function`` (the tab's worker runs it)."""
+        self.history: FilterHistory | None = None
+        self.tape_key = None
+        with gui.add_folder("Filter debugger", expand_by_default=False):
+            self.note = gui.add_markdown(RUNNING_NOTE)
+            self.scrubber = gui.add_slider("Sample", min=0, max=1, step=1, initial_value=0, disabled=True,
+                                           hint="The kept samples of the filter (newest on the right).")
+            self.steps = gui.add_button_group("Step", ("◀ 10", "◀ 1", "1 ▶", "10 ▶"))
+            pairs = [f"{a[0]} / {b[0]}" for n, a in enumerate(states) for b in states[n + 1:]]
+            self.pairs = [(n, m) for n in range(len(states)) for m in range(n + 1, len(states))]
+            self.pair = gui.add_dropdown("Ellipse states", tuple(pairs), initial_value=pairs[0])
+            self.window = gui.add_slider("NEES/NIS window", min=50, max=4000, step=50, initial_value=1000,
+                                         hint="Samples up to the shown one that the consistency tests average.")
+            self.chart = gui.add_uplot((np.zeros(2), np.zeros(2)), (viser.uplot.Series(label="x"),
+                                                                    viser.uplot.Series(label="y")), aspect=1.2)
+            self.readouts = gui.add_markdown("")
+            self.q_scale = gui.add_number("Branch Q ×", initial_value=10.0, min=1e-6, max=1e6)
+            self.r_scale = gui.add_number("Branch R ×", initial_value=1.0, min=1e-6, max=1e6)
+            self.branch_button = gui.add_button("Branch from this sample",
+                                                hint="Reruns the filter from here with Q and R scaled, on the same "
+                                                     "measurements and inputs (the plant stays as recorded).")
+            self.branch_text = gui.add_markdown("")
+            self.text = gui.add_markdown("")
+        moves = {"◀ 10": -10, "◀ 1": -1, "1 ▶": 1, "10 ▶": 10}
+        self.steps.on_click(on("debugger step", lambda: self.step(moves[self.steps.value])))
+        for handle in (self.scrubber, self.pair, self.window):
+            handle.on_update(on("debugger view", self.draw))
+        self.branch_button.on_click(on("debugger branch", self.show_branch))
+
+    @classmethod
+    def add(cls, gui, simulation, on) -> FilterDebugger | None:
+        """The debugger for ``simulation`` (None without a filter tape)."""
+        return cls(gui, simulation.filter_tape().model.states, on) if available(simulation) else None
+
+    def show(self, running: bool, simulation) -> None:
+        """Replay the tape when paused (newest sample shown); hide the views while running."""
+        self.scrubber.disabled = running
+        if running or not available(simulation):
+            self.note.content, self.history = RUNNING_NOTE, None
+            return
+        tape = simulation.filter_tape()
+        key = (id(tape), tape.count, tape.chunks[-1][0] if tape.chunks else None)
+        if key != self.tape_key:
+            self.tape_key, self.history = key, tape.history()
+        if self.history is None:
+            self.note.content = "*No samples yet: press Run or Step.*"
+            return
+        first, last = self.history.first_sample, self.history.first_sample + len(self.history) - 1
+        self.note.content = f"Samples {first} … {last} are kept: step back, or drag the scrubber."
+        self.scrubber.min, self.scrubber.max = first, max(last, first + 1)
+        self.scrubber.value = last
+        self.draw()
+
+    def step(self, samples: int) -> None:
+        if self.history is not None:
+            self.scrubber.value = int(np.clip(self.scrubber.value + samples, self.scrubber.min,
+                                              self.history.first_sample + len(self.history) - 1))
+            self.draw()
+
+    def row(self) -> int:
+        return int(np.clip(int(self.scrubber.value) - self.history.first_sample, 0, len(self.history) - 1))
+
+    def draw(self) -> None:
+        if self.history is None:
+            return
+        row = self.row()
+        data, options = ellipse_chart(self.history, row, self.pairs[self.pair.options.index(self.pair.value)])
+        self.chart.series, self.chart.axes, self.chart.data = options["series"], options["axes"], data
+        self.chart.scales, self.chart.title = options["scales"], options["title"]
+        self.chart.legend, self.chart.padding = options["legend"], options["padding"]
+        self.text.content = equations(self.history, row)
+        self.readouts.content = consistency_text(self.history, row, int(self.window.value))
+
+    def show_branch(self) -> None:
+        if self.history is None:
+            return
+        row = self.row()
+        model = self.history.model.scaled(float(self.q_scale.value), float(self.r_scale.value))
+        rerun = branch(self.history, row, model)
+        original = self.history.rows(row, len(self.history))
+        lines = [(f"Branch from sample {self.history.first_sample + row} with Q ×{number(self.q_scale.value)}, "
+                  f"R ×{number(self.r_scale.value)} over {len(rerun)} samples:"), "",
+                 "| | NEES | NIS | RMS error of the first state |", "|---|---:|---:|---:|"]
+        for name, part in (("original", original), ("branch", rerun)):
+            nees, nis = consistency(part)
+            error = part.truth[:, 0] - part.x_post[:, 0]
+            lines.append(f"| {name} | {number(nees.mean, 3)} ({'in' if nees.inside else 'out'}) "
+                         f"| {number(nis.mean, 3)} ({'in' if nis.inside else 'out'}) "
+                         f"| {number(float(np.sqrt(np.mean(error**2))))} {self.history.model.states[0][1]} |")
+        self.branch_text.content = "\n".join(lines)
