@@ -15,6 +15,7 @@ import numpy as np
 import viser
 
 from app.panels import scope
+from app.panels.inspector import prefixed
 from app.panels.typeset import typeset
 from lab_modules.estimators.filter_consistency import consistency
 from lab_modules.estimators.filter_history import FilterHistory, branch
@@ -107,14 +108,19 @@ def ellipse_chart(history: FilterHistory, row: int, pair: tuple[int, int]) -> tu
         series.append(viser.uplot.Series(label=label, stroke=colour, width=0,
                                          points=viser.uplot.Series_Points(show=True, size=9, fill=colour,
                                                                           stroke=colour)))
+    (x_label, x_unit), (y_label, y_unit) = history.model.states[i], history.model.states[j]
+    # SI values of µm or mA would all read 0 on uPlot's ticks: each axis in a prefixed unit
+    x_factor, x_unit = prefixed(half / 3.0, x_unit)
+    y_factor, y_unit = prefixed(3.0 * math.sqrt(s["P_prior"][j, j]), y_unit)
+    data = [data[0] / x_factor] + [d / y_factor for d in data[1:]]
+    x = data[0]
     finite = np.concatenate([d[np.isfinite(d)] for d in data[1:]])
     low, high = float(finite.min()), float(finite.max())
     margin = 0.05 * (high - low) or abs(high) or 1.0
-    (_, x_unit), (y_label, y_unit) = history.model.states[i], history.model.states[j]
     return tuple(data), {
         "series": tuple(series), "title": f"P⁻ and P⁺ at sample {s['sample']}: 1σ, 2σ, 3σ",
         "legend": viser.uplot.Legend(show=False), "padding": scope.PADDING,
-        "axes": (viser.uplot.Axis(label=f"{history.model.states[i][0]} [{x_unit}]"),
+        "axes": (viser.uplot.Axis(label=f"{x_label} [{x_unit}]"),
                  viser.uplot.Axis(label=f"{y_label} [{y_unit}]", size=70)),
         "scales": {"x": viser.uplot.Scale(time=False, auto=False, min=float(x[0]), max=float(x[-1])),
                    "y": viser.uplot.Scale(auto=False, min=low - margin, max=high + margin)}}
