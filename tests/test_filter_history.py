@@ -9,8 +9,8 @@ from filterpy.kalman import KalmanFilter as ReferenceFilter
 from lab_modules.estimators.filter_consistency import bounds, consistency
 from lab_modules.estimators.filter_history import (
     ARRAY_FIELDS,
+    FilterModel,
     FilterTape,
-    LinearModel,
     branch,
     predict,
     replay,
@@ -20,14 +20,14 @@ from lab_modules.exercises import get
 T = 1e-3
 
 
-def tracking_model(q: float = 1e-2, r: float = 1e-4) -> LinearModel:
+def tracking_model(q: float = 1e-2, r: float = 1e-4) -> FilterModel:
     """A cart pushed by a known force u: position measured, velocity driven by white noise."""
-    return LinearModel.of("cart", T, [[1.0, T], [0.0, 1.0]], [0.5 * T * T, T], [[1.0, 0.0]],
+    return FilterModel.of("cart", T, [[1.0, T], [0.0, 1.0]], [0.5 * T * T, T], [[1.0, 0.0]],
                           np.diag([0.0, q]) + 1e-12 * np.eye(2), [r], (("x", "m"), ("v", "m/s")),
                           (("position", "m"),))
 
 
-def cart_run(model: LinearModel, samples: int, seed: int = 1, q: float = 1e-2, r: float = 1e-4):
+def cart_run(model: FilterModel, samples: int, seed: int = 1, q: float = 1e-2, r: float = 1e-4):
     """(u, y, truth) of the cart with process variance q and sensor variance r per sample."""
     rng = np.random.default_rng(seed)
     u = np.sin(np.arange(samples) * 0.01)[:, None]
@@ -82,7 +82,7 @@ def test_tape_is_bounded_and_keeps_the_newest_samples():
 
 
 def test_the_tape_refuses_a_full_measurement_covariance():
-    model = LinearModel.of("two sensors", T, np.eye(2), [0.0, 0.0], np.eye(2), np.eye(2), [[1.0, 0.5], [0.5, 1.0]],
+    model = FilterModel.of("two sensors", T, np.eye(2), [0.0, 0.0], np.eye(2), np.eye(2), [[1.0, 0.5], [0.5, 1.0]],
                            (("a", "m"), ("b", "m")), (("a", "m"), ("b", "m")))
     with pytest.raises(ValueError, match="diagonal R"):
         FilterTape(model)
@@ -99,7 +99,7 @@ def kalman_noise_run():
 
 def test_replay_equals_the_compiled_loops_filter(kalman_noise_run):
     simulation, history = kalman_noise_run
-    x, P = predict(history.model, history.x_post[-1], history.P_post[-1], history.u[-1])
+    x, P = predict(history.model, history.x_post[-1], history.P_post[-1], history.u[-1])[:2]
     sigma = np.sqrt(np.diag(P))
     assert np.all(np.abs(x - simulation.filter.x) < 1e-9 * sigma)
     np.testing.assert_allclose(P, simulation.filter.covariance, rtol=1e-9, atol=1e-12 * np.abs(P).max())

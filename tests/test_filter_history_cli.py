@@ -9,7 +9,8 @@ import scipy.stats
 
 from app.cli import main
 
-SUPPORTED = ("kalman_noise", "lqg_vs_pid", "thrust_liftoff")
+SUPPORTED = ("kalman_noise", "lqg_vs_pid", "thrust_liftoff", "ekf_parameters", "ekf_disturbance", "maglev_tracking",
+             "maglev_tuning", "adaptive_filter", "stiffness_map")
 
 
 def printed(capsys, *argv) -> dict:
@@ -24,13 +25,16 @@ def arrays(samples: list[dict], name: str) -> np.ndarray:
 @pytest.mark.parametrize("exercise", SUPPORTED)
 def test_printed_history_obeys_the_filter_equations(capsys, exercise):
     result = printed(capsys, exercise, "--filter-history", "2500:2600")
-    model = {name: np.array(result["filter"][name], dtype=float) for name in ("Phi", "Gamma", "H", "Q", "R")}
-    Phi, Gamma, H, Q, R = (model[name] for name in ("Phi", "Gamma", "H", "Q", "R"))
+    model = {name: np.array(result["filter"][name], dtype=float) for name in ("Gamma", "H", "R")}
+    Gamma, H, R = (model[name] for name in ("Gamma", "H", "R"))
     samples = result["history"]["samples"]
     assert [s["sample"] for s in samples] == list(range(2500, 2600))
-    x_prior, P_prior, K, nu, S, x_post, P_post, y, u = (arrays(samples, name) for name in (
-        "x_prior", "P_prior", "K", "innovation", "S", "x_post", "P_post", "y", "u"))
-    identity = np.eye(Phi.shape[0])
+    x_prior, P_prior, K, nu, S, x_post, P_post, y, u, Phi, Q = (arrays(samples, name) for name in (
+        "x_prior", "P_prior", "K", "innovation", "S", "x_post", "P_post", "y", "u", "Phi", "Q"))
+    identity = np.eye(H.shape[1])
+    linear = np.all(np.isfinite(Gamma))             # else x̂⁻ is the filter's own f(x̂⁺, u) (an EKF)
+    integrated = np.all(np.isnan(Phi))              # the continuous-discrete EKF integrates P (eq. 2.45)
+    assert integrated == exercise.startswith("maglev")
     for k in range(len(samples)):
         scale = np.abs(P_prior[k]).max()
         np.testing.assert_allclose(S[k], H @ P_prior[k] @ H.T + R, rtol=1e-12)            # S = H P⁻ Hᵀ + R
@@ -44,9 +48,11 @@ def test_printed_history_obeys_the_filter_equations(capsys, exercise):
         for P in (P_prior[k], P_post[k]):
             assert np.array_equal(P, P.T)
             assert np.linalg.eigvalsh(P).min() >= -1e-12 * np.abs(P).max()
-        if k + 1 < len(samples):
-            np.testing.assert_allclose(x_prior[k + 1], Phi @ x_post[k] + Gamma @ u[k], rtol=1e-9, atol=1e-15)
-            np.testing.assert_allclose(P_prior[k + 1], Phi @ P_post[k] @ Phi.T + Q, rtol=1e-9, atol=1e-12 * scale)
+        if k + 1 < len(samples) and linear:
+            np.testing.assert_allclose(x_prior[k + 1], Phi[k] @ x_post[k] + Gamma @ u[k], rtol=1e-9, atol=1e-15)
+        if k + 1 < len(samples) and not integrated:       # P⁻ = Φ_k P⁺ Φ_kᵀ + Q_k with the sample's own Φ_k, Q_k
+            np.testing.assert_allclose(P_prior[k + 1], Phi[k] @ P_post[k] @ Phi[k].T + Q[k], rtol=1e-9,
+                                       atol=1e-12 * scale)
 
 
 def test_branch_with_unchanged_settings_prints_the_history_bit_for_bit(capsys):
@@ -84,7 +90,8 @@ def test_bounds_are_scipys_and_a_mistuned_filter_is_named(capsys):
     (["kalman_noise", "--filter-history", "0:10", "--branch", "q_scale=nan@5"], "out of range"),
     (["kalman_noise", "--filter-history", "0:10", "--branch", "q_scale=2@50"], "outside"),
     (["kalman_noise", "--branch", "q_scale=2@5"], "needs --filter-history"),
-    (["maglev_tuning", "--filter-history", "0:10"], "no linear Kalman filter"),
+    (["rotor_at_speed", "--filter-history", "0:10"], "no sampled Kalman filter"),
+    (["maglev_tracking", "--set", "filter=continuous-time", "--filter-history", "0:10"], "no sampled Kalman filter"),
 ])
 def test_bad_input_exits_2_with_one_line(capsys, argv, words):
     assert main(["run", *argv]) == 2

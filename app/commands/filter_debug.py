@@ -97,8 +97,8 @@ def report(exercise, values: dict, span: str, branch_text: str | None) -> dict:
     """The filter's history for ``span`` (``FROM:TO``) and the branch ``branch_text``, as data."""
     first_sample, last_sample = sample_range(span)
     simulation = exercise.simulation(values)
-    if not callable(getattr(simulation, "filter_tape", None)):
-        raise ParameterError(f"exercise {exercise.name!r} has no linear Kalman filter to replay "
+    if not callable(getattr(simulation, "filter_tape", None)) or simulation.filter_tape() is None:
+        raise ParameterError(f"exercise {exercise.name!r} has no sampled Kalman filter to replay at these settings "
                              "(--filter-history works for the exercises whose simulation offers filter_tape)")
     scales, branch_sample = branch_settings(branch_text, simulation.sample_time_s) if branch_text else ({}, None)
     if branch_sample is not None and not first_sample <= branch_sample < last_sample:

@@ -29,7 +29,8 @@ DIGITS = 4
 
 
 def available(simulation) -> bool:
-    return callable(getattr(simulation, "filter_tape", None))
+    """A simulation with a sampled filter (``filter_tape()`` None: its filter corrects continuously)."""
+    return callable(getattr(simulation, "filter_tape", None)) and simulation.filter_tape() is not None
 
 
 def latex_number(value: float) -> str:
@@ -56,10 +57,11 @@ def equations(history: FilterHistory, row: int) -> str:
     s = history.sample(row)
     sigma_prior, sigma_post = np.sqrt(np.diag(s["P_prior"])), np.sqrt(np.diag(s["P_post"]))
     units = ", ".join(unit for _, unit in history.model.states)
+    x_prediction, P_prediction = history.model.prediction
     return typeset("\n\n".join([
         f"**Sample {s['sample']}**, t = {s['time_s'] * 1e3:.3f} ms (states in {units}):",
-        r"$$\hat{x}^- = \Phi\hat{x}^+_{k-1} + \Gamma u_{k-1} = " + column(s["x_prior"]) + "$$",
-        r"$$\sigma^- = \sqrt{\mathrm{diag}(\Phi P^+\Phi^T + Q)} = " + column(sigma_prior) + "$$",
+        rf"$$\hat{{x}}^- = {x_prediction} = " + column(s["x_prior"]) + "$$",
+        rf"$$P^- = {P_prediction},\quad \sigma^- = \sqrt{{\mathrm{{diag}}(P^-)}} = " + column(sigma_prior) + "$$",
         r"$$S = H P^- H^T + R = " + matrix(s["S"]) + "$$",
         r"$$K = P^- H^T S^{-1} = " + matrix(s["K"]) + "$$",
         r"$$\nu = y - H\hat{x}^- = " + column(s["y"]) + " - " + column(history.model.H @ s["x_prior"])
@@ -226,9 +228,10 @@ class FilterDebugger:
                   f"R ×{number(self.r_scale.value)} over {len(rerun)} samples:"), "",
                  "| | NEES | NIS | RMS error of the first state |", "|---|---:|---:|---:|"]
         for name, part in (("original", original), ("branch", rerun)):
-            nees, nis = consistency(part)
+            tests = {test.name: test for test in consistency(part)}
+            cells = [f"{number(t.mean, 3)} ({'in' if t.inside else 'out'})" if t else "n/a (no true state)"
+                     for t in (tests.get("NEES"), tests["NIS"])]
             error = part.truth[:, 0] - part.x_post[:, 0]
-            lines.append(f"| {name} | {number(nees.mean, 3)} ({'in' if nees.inside else 'out'}) "
-                         f"| {number(nis.mean, 3)} ({'in' if nis.inside else 'out'}) "
+            lines.append(f"| {name} | {cells[0]} | {cells[1]} "
                          f"| {number(float(np.sqrt(np.mean(error**2))))} {self.history.model.states[0][1]} |")
         self.branch_text.content = "\n".join(lines)

@@ -93,12 +93,13 @@ def normalised_test(name: str, samples: np.ndarray, dof: int, independent: int) 
     return ConsistencyTest(name, float(np.mean(samples)), dof, len(samples), independent, *bounds(independent, dof))
 
 
-def consistency(history: FilterHistory, window: int | None = None) -> tuple[ConsistencyTest, ConsistencyTest]:
-    """(NEES, NIS) over the newest ``window`` samples of ``history`` (None: all of it)."""
+def consistency(history: FilterHistory, window: int | None = None) -> tuple[ConsistencyTest, ...]:
+    """(NEES, NIS) over the newest ``window`` samples of ``history`` (None: all of it); NIS
+    alone when no true state is known (a recording)."""
     if window is not None:
         history = history.rows(max(0, len(history) - int(window)), len(history))
     nees, states = nees_samples(history)
-    nis = nis_samples(history)
-    tau = integrated_autocorrelation_time(nees)
-    return (normalised_test("NEES", nees, states, int(len(nees) / tau)),
-            normalised_test("NIS", nis, history.model.H.shape[0], len(nis)))
+    nis = normalised_test("NIS", nis_samples(history), history.model.H.shape[0], len(history))
+    if states == 0:
+        return (nis,)
+    return normalised_test("NEES", nees, states, int(len(nees) / integrated_autocorrelation_time(nees))), nis

@@ -17,7 +17,7 @@ import scipy.signal
 
 from lab_modules import analysis
 from lab_modules.controllers.pid import DiscreteController
-from lab_modules.estimators.filter_history import FilterTape, LinearModel
+from lab_modules.estimators.filter_history import FilterModel, FilterTape
 from lab_modules.estimators.kalman import KalmanFilter, correction, pad_vector
 from lab_modules.loops import radial_axis_loop
 from lab_modules.plants.radial_bearing import RIG, BearingAxis
@@ -215,7 +215,7 @@ class AxisSimulation:
         self.step = 0
         self.status = radial_axis_loop.OK
         self._last_correction = None                   # (prior x̂, prior P, y, time) of the last sample
-        self.tape = FilterTape(LinearModel.of_filter(self.filter, FILTER_TITLE, rig.sample_time_s,
+        self.tape = FilterTape(FilterModel.of_filter(self.filter, FILTER_TITLE, rig.sample_time_s,
                                                      self.STATE_LABELS[:n], MEASUREMENTS))
         self._reference_filter = None                  # (numerator, denominator, filter state)
         if setup.reference_filter is not None:

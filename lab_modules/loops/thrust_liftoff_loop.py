@@ -38,7 +38,7 @@ import scipy.linalg
 import scipy.signal
 
 from lab_modules import analysis
-from lab_modules.estimators.filter_history import FilterTape, LinearModel
+from lab_modules.estimators.filter_history import FilterModel, FilterTape
 from lab_modules.estimators.kalman import STATE_SIZE, correction, predict, update
 from lab_modules.estimators.thrust_kalman import H, ThrustFilterDesign
 from lab_modules.plants.thrust_bearing import GRAVITY_M_PER_S2, TABLE_1, ThrustBearing, discrete_current_loop
@@ -310,7 +310,7 @@ class ThrustSimulation:
         G_A, G_B, G_C, G_D = self._current
         self._current_loop = CurrentLoop(active=s.current_loop, state=self.coil, A=G_A, B=G_B, C=G_C, D=G_D)
         self._kalman = kf.arrays()
-        self.tape = FilterTape(LinearModel.of_filter(kf, FILTER_TITLE, b.sample_time_s, STATES, MEASUREMENTS))
+        self.tape = FilterTape(FilterModel.of_filter(kf, FILTER_TITLE, b.sample_time_s, STATES, MEASUREMENTS))
         self._pid = LiftoffPID(state=self.pid, proportional_a_per_m=s.proportional_a_per_m,
                                integral_a_per_m_s=s.integral_a_per_m_s, derivative_a_s_per_m=s.derivative_a_s_per_m,
                                derivative_filter=self._derivative_filter, current_limit_a=s.current_limit_a,
