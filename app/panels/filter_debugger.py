@@ -14,7 +14,7 @@ import math
 import numpy as np
 import viser
 
-from app.panels import scope
+from app.panels import filter_branch, scope
 from app.panels.inspector import prefixed
 from app.panels.typeset import typeset
 from lab_modules.estimators.filter_consistency import consistency
@@ -143,9 +143,13 @@ def consistency_text(history: FilterHistory, row: int, window: int) -> str:
 class FilterDebugger:
     """The "Filter debugger" folder: scrubber, step buttons, equations, ellipses, consistency, branch."""
 
-    def __init__(self, gui, states: tuple[tuple[str, str], ...], on):
-        """``on(name, function)`` makes a GUI callback of ``function`` (the tab's worker runs it)."""
+    def __init__(self, gui, states: tuple[tuple[str, str], ...], on, keep=None):
+        """``on(name, function)`` makes a GUI callback of ``function`` (the tab's worker runs it);
+        ``keep(q_scale, r_scale, model)`` makes a branch's Q and R the running setting and says what
+        it did (None: branches cannot be kept)."""
         self.history: FilterHistory | None = None
+        self.rerun: FilterHistory | None = None   # the branch on show, if any
+        self.keep = keep
         self.tape_key = None
         with gui.add_folder("Filter debugger", expand_by_default=False):
             self.note = gui.add_markdown(RUNNING_NOTE)
@@ -162,9 +166,14 @@ class FilterDebugger:
             self.readouts = gui.add_markdown("")
             self.q_scale = gui.add_number("Branch Q ×", initial_value=10.0, min=1e-6, max=1e6)
             self.r_scale = gui.add_number("Branch R ×", initial_value=1.0, min=1e-6, max=1e6)
+            self.horizon = gui.add_slider("Branch horizon", min=50, max=4000, step=50,
+                                          initial_value=filter_branch.AFTER, hint="Samples the branch reruns.")
             self.branch_button = gui.add_button("Branch from this sample",
                                                 hint="Reruns the filter from here with Q and R scaled, on the same "
                                                      "measurements and inputs (the plant stays as recorded).")
+            self.keep_drop = gui.add_button_group("Branch", ("Keep", "Drop"))
+            self.overlay = gui.add_uplot((np.zeros(2), np.zeros(2)), (viser.uplot.Series(label="t"),
+                                                                      viser.uplot.Series(label="x")), aspect=1.6)
             self.branch_text = gui.add_markdown("")
             self.text = gui.add_markdown("")
         moves = {"◀ 10": -10, "◀ 1": -1, "1 ▶": 1, "10 ▶": 10}
@@ -172,11 +181,12 @@ class FilterDebugger:
         for handle in (self.scrubber, self.pair, self.window):
             handle.on_update(on("debugger view", self.draw))
         self.branch_button.on_click(on("debugger branch", self.show_branch))
+        self.keep_drop.on_click(on("debugger keep", lambda: self.keep_or_drop(self.keep_drop.value)))
 
     @classmethod
-    def add(cls, gui, simulation, on) -> FilterDebugger | None:
+    def add(cls, gui, simulation, on, keep=None) -> FilterDebugger | None:
         """The debugger for ``simulation`` (None without a filter tape)."""
-        return cls(gui, simulation.filter_tape().model.states, on) if available(simulation) else None
+        return cls(gui, simulation.filter_tape().model.states, on, keep) if available(simulation) else None
 
     def show(self, running: bool, simulation) -> None:
         """Replay the tape when paused (newest sample shown); hide the views while running."""
@@ -187,7 +197,7 @@ class FilterDebugger:
         tape = simulation.filter_tape()
         key = (id(tape), tape.count, tape.chunks[-1][0] if tape.chunks else None)
         if key != self.tape_key:
-            self.tape_key, self.history = key, tape.history()
+            self.tape_key, self.history, self.rerun = key, tape.history(), None
         if self.history is None:
             self.note.content = "*No samples yet: press Run or Step.*"
             return
@@ -216,14 +226,19 @@ class FilterDebugger:
         self.chart.legend, self.chart.padding = options["legend"], options["padding"]
         self.text.content = equations(self.history, row)
         self.readouts.content = consistency_text(self.history, row, int(self.window.value))
+        pair = self.pairs[self.pair.options.index(self.pair.value)]
+        data, options = filter_branch.overlay_chart(self.history, row, pair[0], self.rerun, int(self.horizon.value))
+        self.overlay.series, self.overlay.axes, self.overlay.data = options["series"], options["axes"], data
+        self.overlay.scales, self.overlay.title = options["scales"], options["title"]
+        self.overlay.legend, self.overlay.padding = options["legend"], options["padding"]
 
     def show_branch(self) -> None:
         if self.history is None:
             return
         row = self.row()
         model = self.history.model.scaled(float(self.q_scale.value), float(self.r_scale.value))
-        rerun = branch(self.history, row, model)
-        original = self.history.rows(row, len(self.history))
+        rerun = self.rerun = branch(self.history, row, model, int(self.horizon.value))
+        original = self.history.rows(row, row + len(rerun))
         lines = [(f"Branch from sample {self.history.first_sample + row} with Q ×{number(self.q_scale.value)}, "
                   f"R ×{number(self.r_scale.value)} over {len(rerun)} samples:"), "",
                  "| | NEES | NIS | RMS error of the first state |", "|---|---:|---:|---:|"]
@@ -235,3 +250,15 @@ class FilterDebugger:
             lines.append(f"| {name} | {cells[0]} | {cells[1]} "
                          f"| {number(float(np.sqrt(np.mean(error**2))))} {self.history.model.states[0][1]} |")
         self.branch_text.content = "\n".join(lines)
+        self.draw()
+
+    def keep_or_drop(self, which: str) -> None:
+        """"Keep": the branch's Q and R become the running setting (the tab's controls follow);
+        "Drop": the branch leaves the charts."""
+        if which == "Keep" and self.rerun is not None and self.keep is not None:
+            model, tuned = self.history.model, self.rerun.model
+            self.branch_text.content = self.keep(tuned.q_scale / model.q_scale, float(tuned.R[0, 0] / model.R[0, 0]),
+                                                 model)
+            return
+        self.rerun, self.branch_text.content = None, ""
+        self.draw()

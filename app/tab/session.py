@@ -32,7 +32,7 @@ import viser
 
 from app.infra import layout
 from app.infra.store import Store
-from app.panels import entry, scope, worksheets
+from app.panels import entry, filter_branch, scope, worksheets
 from app.panels.actions import ActionPanel
 from app.panels.docks import Docks
 from app.panels.export import ExportButtons
@@ -240,7 +240,8 @@ class LabSession:
         buttons.on_click(on("buttons", lambda: self._on_button(buttons.value)))
         self.status.add_speed(gui)                # filled in while it runs
         self.inspector = FilterInspector.add(gui, self.state.simulation, on("inspector step", self._step_one))
-        self.debugger = FilterDebugger.add(gui, self.state.simulation, on)
+        self.debugger = FilterDebugger.add(gui, self.state.simulation, on, keep=lambda q, r, model: filter_branch.keep(
+            self.state.exercise, self.state.values_now(), model, q, r, self.controls.follow))
         ActionPanel(gui, exercise, on, self.state.values_now, self._still_current(), self.gui_lock,
                     self.worker, self.client, plot_chart)   # the exercise's buttons, if any
         if self.scene is not None:
