@@ -12,7 +12,6 @@ from __future__ import annotations
 import numpy as np
 import viser
 
-from app.panels import scope
 from app.panels.inspector import prefixed
 from lab_modules.estimators.filter_history import FilterHistory, FilterModel
 from lab_modules.formatting import number
@@ -23,14 +22,30 @@ BEFORE = 200                     # samples shown before the shown one
 AFTER = 400                      # samples shown after it (the branch's horizon by default)
 
 
+_PLAIN = {"points": viser.uplot.Series_Points(show=False)}
+_DASHED = {"dash": (6.0, 4.0), **_PLAIN}
+#: The overlay's series (fixed, so that a new sample or branch changes only the data).
+SERIES = (viser.uplot.Series(label="t − t_shown [ms]"),
+          viser.uplot.Series(label="x̂⁺", stroke=ORIGINAL_COLOUR, width=1.5, **_PLAIN),
+          viser.uplot.Series(label="±3σ", stroke=ORIGINAL_COLOUR, width=0.75, **_PLAIN),
+          viser.uplot.Series(label="", stroke=ORIGINAL_COLOUR, width=0.75, **_PLAIN),
+          viser.uplot.Series(label="true", stroke=TRUTH_COLOUR, width=1.0, **_PLAIN),
+          viser.uplot.Series(label="branch x̂⁺", stroke=BRANCH_COLOUR, width=2.0, **_DASHED),
+          viser.uplot.Series(label="branch ±3σ", stroke=BRANCH_COLOUR, width=1.0, **_DASHED),
+          viser.uplot.Series(label="", stroke=BRANCH_COLOUR, width=1.0, **_DASHED),
+          viser.uplot.Series(label="shown sample", stroke=MARK_COLOUR, width=1.5, **_PLAIN))
+
+
 def overlay_chart(history: FilterHistory, row: int, state: int, rerun: FilterHistory | None,
                   after: int = AFTER) -> tuple[tuple, dict]:
     """uPlot data and options: state ``state``'s x̂⁺ ± 3σ of the history (solid) from ``BEFORE``
     samples before row ``row`` to ``after`` after, the branch ``rerun`` (dashed) where it runs, the
-    true state, and the shown sample as a vertical line (its time twice on the x axis)."""
+    true state, and the shown sample as a vertical line (its time twice on the x axis, the first a
+    millionth of a sample earlier: uPlot ranges x only over rising values)."""
     first, last = max(0, row - BEFORE), min(len(history), row + max(after, 2))
     rows = np.insert(np.arange(first, last), row - first, row)          # the shown sample twice
     t_ms = (history.time_s[rows] - history.time_s[row]) * 1e3
+    t_ms[row - first] -= 1e-6 * history.model.sample_time_s * 1e3     # x rising: the mark a hair before t = 0
     sigma = np.sqrt(history.P_post[rows, state, state])
     series = {"x̂⁺": history.x_post[rows, state], "+3σ": history.x_post[rows, state] + 3 * sigma,
               "−3σ": history.x_post[rows, state] - 3 * sigma, "true": history.truth[rows, state]}
@@ -48,25 +63,13 @@ def overlay_chart(history: FilterHistory, row: int, state: int, rerun: FilterHis
     mark[row - first], mark[row - first + 1] = low, high
     label, unit = history.model.states[state]
     factor, unit = prefixed(max(abs(low), abs(high)), unit)
-    plain = {"points": viser.uplot.Series_Points(show=False)}
-    dashed = {"dash": (6.0, 4.0), **plain}
-    options = [viser.uplot.Series(label="t − t_shown [ms]"),
-               viser.uplot.Series(label="x̂⁺", stroke=ORIGINAL_COLOUR, width=1.5, **plain),
-               viser.uplot.Series(label="±3σ", stroke=ORIGINAL_COLOUR, width=0.75, **plain),
-               viser.uplot.Series(label="", stroke=ORIGINAL_COLOUR, width=0.75, **plain),
-               viser.uplot.Series(label="true", stroke=TRUTH_COLOUR, width=1.0, **plain),
-               viser.uplot.Series(label="branch x̂⁺", stroke=BRANCH_COLOUR, width=2.0, **dashed),
-               viser.uplot.Series(label="branch ±3σ", stroke=BRANCH_COLOUR, width=1.0, **dashed),
-               viser.uplot.Series(label="", stroke=BRANCH_COLOUR, width=1.0, **dashed),
-               viser.uplot.Series(label="shown sample", stroke=MARK_COLOUR, width=1.5, **plain)]
     data = (t_ms, *(v / factor for v in (*series.values(), *branch_values, mark)))
     margin = 0.05 * (high - low) / factor or 1.0
     return data, {
-        "series": tuple(options), "title": f"{label}: the filter (solid), the branch (dashed), the shown sample",
-        "legend": viser.uplot.Legend(show=True), "padding": scope.PADDING,
+        "title": f"{label}: the filter (solid), the branch (dashed), the shown sample",
         "axes": (viser.uplot.Axis(label="time from the shown sample [ms]"),
                  viser.uplot.Axis(label=f"{label} [{unit}]", size=70)),
-        "scales": {"x": viser.uplot.Scale(time=False, auto=False, min=float(t_ms[0]), max=float(t_ms[-1])),
+        "scales": {"x": viser.uplot.Scale(time=False),
                    "y": viser.uplot.Scale(auto=False, min=low / factor - margin, max=high / factor + margin)}}
 
 

@@ -23,7 +23,7 @@ from lab_modules.formatting import number
 
 RUNNING_NOTE = "*Pause the simulation to step back through the filter's last samples.*"
 SIGMAS = (1, 2, 3)
-PRIOR_COLOUR, POSTERIOR_COLOUR, TRUTH_COLOUR = "#1f77b4", "#d62728", "#2ca02c"
+PRIOR_COLOUR, POSTERIOR_COLOUR, TRUTH_COLOUR, MEASUREMENT_COLOUR = "#1f77b4", "#d62728", "#2ca02c", "#7f7f7f"
 GRID = 121                        # x points per ellipse half
 DIGITS = 4
 
@@ -81,9 +81,42 @@ def ellipse(centre, P2, sigmas: float, x: np.ndarray) -> tuple[np.ndarray, np.nd
         return centre[1] + (b * dx + root) / a, centre[1] + (b * dx - root) / a
 
 
+def ellipse_series() -> tuple:
+    """The ellipse chart's series (fixed, so that a new sample changes only the data): x, the
+    upper and lower halves of the 1σ/2σ/3σ ellipses of P⁻ and P⁺, x̂⁻, x̂⁺, the true state and
+    the measurement's constraint line."""
+    series = [viser.uplot.Series(label="x")]
+    for name, colour in (("P⁻", PRIOR_COLOUR), ("P⁺", POSTERIOR_COLOUR)):
+        for sigmas in SIGMAS:
+            dashed = {"dash": (4.0, 4.0)} if sigmas > 1 else {}
+            series += [viser.uplot.Series(label=f"{sigmas}σ {name}{half}", stroke=colour, width=2.0 if sigmas == 1
+                                          else 1.25, **dashed, points=viser.uplot.Series_Points(show=False))
+                       for half in ("", " ")]
+    series += [viser.uplot.Series(label=label, stroke=colour, width=0, points=viser.uplot.Series_Points(
+        show=True, size=9, fill=colour, stroke=colour))
+        for label, colour in (("x̂⁻", PRIOR_COLOUR), ("x̂⁺", POSTERIOR_COLOUR), ("true x", TRUTH_COLOUR))]
+    series.append(viser.uplot.Series(label="H x = y", stroke=MEASUREMENT_COLOUR, width=1.5, dash=(8.0, 3.0),
+                                     points=viser.uplot.Series_Points(show=False)))
+    return tuple(series)
+
+
+def constraint_line(history: FilterHistory, row: int, pair: tuple[int, int], x: np.ndarray) -> np.ndarray | None:
+    """For a scalar measurement, the states of ``pair`` that explain y exactly with the others at
+    x̂⁻: h_i x_i + h_j x_j = y − Σ_other h_k x̂⁻_k, as values over ``x`` (None: a vertical line at
+    the returned x_i is drawn by the caller; NaN: no line, the measurement sees neither state)."""
+    H, s = history.model.H, history.sample(row)
+    if H.shape[0] != 1:
+        return np.full(len(x), np.nan)
+    i, j = pair
+    rest = float(s["y"][0] - H[0] @ s["x_prior"] + H[0, i] * s["x_prior"][i] + H[0, j] * s["x_prior"][j])
+    if H[0, j] != 0.0:
+        return (rest - H[0, i] * x) / H[0, j]                  # x_j = (y' − h_i x_i) / h_j
+    return None if H[0, i] != 0.0 else np.full(len(x), np.nan)
+
+
 def ellipse_chart(history: FilterHistory, row: int, pair: tuple[int, int]) -> tuple[tuple, dict]:
-    """uPlot data and options: the ellipses of P⁻ (blue) and P⁺ (red) for states ``pair``,
-    x̂⁻, x̂⁺ and the true state as points."""
+    """uPlot data and options (``ellipse_series``): the ellipses of P⁻ (blue) and P⁺ (red) for
+    states ``pair``, x̂⁻, x̂⁺ and the true state as points, a scalar measurement's constraint line."""
     i, j = pair
     s = history.sample(row)
     cut = np.ix_(pair, pair)
@@ -92,39 +125,37 @@ def ellipse_chart(history: FilterHistory, row: int, pair: tuple[int, int]) -> tu
     half = 3.05 * max(math.sqrt(s["P_prior"][i, i]), math.sqrt(s["P_post"][i, i]))
     points = [p for p in (prior[0], post[0], truth[0]) if math.isfinite(p)]
     x = np.unique(np.concatenate([np.linspace(min(points) - half, max(points) + half, GRID), points]))
-    series, data = [viser.uplot.Series(label=history.model.states[i][0])], [x]
-    for name, centre, P, colour in (("P⁻", prior, s["P_prior"][cut], PRIOR_COLOUR),
-                                    ("P⁺", post, s["P_post"][cut], POSTERIOR_COLOUR)):
+    line = constraint_line(history, row, pair, x)
+    vertical_at = None
+    if line is None:                                          # h_j = 0: x_i = y' / h_i, its x twice
+        H = history.model.H[0]
+        vertical_at = float(s["y"][0] - H @ s["x_prior"] + H[i] * s["x_prior"][i]) / H[i]
+        x = np.sort(np.concatenate([x, [vertical_at, vertical_at]]))
+        line = np.full(len(x), np.nan)
+    data = [x]
+    for centre, P in ((prior, s["P_prior"][cut]), (post, s["P_post"][cut])):
         for sigmas in SIGMAS:
-            upper, lower = ellipse(centre, P, sigmas, x)
-            for half_name, values in (("", upper), (" ", lower)):
-                data.append(values)
-                dashed = {"dash": (4.0, 4.0)} if sigmas > 1 else {}
-                series.append(viser.uplot.Series(label=f"{sigmas}σ {name}{half_name}", stroke=colour,
-                                                 width=2.0 if sigmas == 1 else 1.0, **dashed,
-                                                 points=viser.uplot.Series_Points(show=False)))
-    for label, point, colour in (("x̂⁻", prior, PRIOR_COLOUR), ("x̂⁺", post, POSTERIOR_COLOUR),
-                                 ("true x", truth, TRUTH_COLOUR)):
-        values = np.where(x == point[0], point[1], np.nan)
-        data.append(values)
-        series.append(viser.uplot.Series(label=label, stroke=colour, width=0,
-                                         points=viser.uplot.Series_Points(show=True, size=9, fill=colour,
-                                                                          stroke=colour)))
+            data += list(ellipse(centre, P, sigmas, x))
+    data += [np.where(x == point[0], point[1], np.nan) for point in (prior, post, truth)]
     (x_label, x_unit), (y_label, y_unit) = history.model.states[i], history.model.states[j]
     # SI values of µm or mA would all read 0 on uPlot's ticks: each axis in a prefixed unit
     x_factor, x_unit = prefixed(half / 3.0, x_unit)
     y_factor, y_unit = prefixed(3.0 * math.sqrt(s["P_prior"][j, j]), y_unit)
     data = [data[0] / x_factor] + [d / y_factor for d in data[1:]]
-    x = data[0]
     finite = np.concatenate([d[np.isfinite(d)] for d in data[1:]])
     low, high = float(finite.min()), float(finite.max())
     margin = 0.05 * (high - low) or abs(high) or 1.0
+    if vertical_at is not None:
+        first = int(np.searchsorted(x, vertical_at))
+        line[first], line[first + 1] = low - margin, high + margin            # the line spans the chart
+    else:
+        line = np.where((line / y_factor > low - margin) & (line / y_factor < high + margin), line / y_factor, np.nan)
+    data.append(line)
     return tuple(data), {
-        "series": tuple(series), "title": f"P⁻ and P⁺ at sample {s['sample']}: 1σ, 2σ, 3σ",
-        "legend": viser.uplot.Legend(show=False), "padding": scope.PADDING,
+        "title": f"P⁻ and P⁺ at sample {s['sample']}: 1σ, 2σ, 3σ",
         "axes": (viser.uplot.Axis(label=f"{x_label} [{x_unit}]"),
                  viser.uplot.Axis(label=f"{y_label} [{y_unit}]", size=70)),
-        "scales": {"x": viser.uplot.Scale(time=False, auto=False, min=float(x[0]), max=float(x[-1])),
+        "scales": {"x": viser.uplot.Scale(time=False),
                    "y": viser.uplot.Scale(auto=False, min=low - margin, max=high + margin)}}
 
 
@@ -161,8 +192,8 @@ class FilterDebugger:
             self.pair = gui.add_dropdown("Ellipse states", tuple(pairs), initial_value=pairs[0])
             self.window = gui.add_slider("NEES/NIS window", min=50, max=4000, step=50, initial_value=1000,
                                          hint="Samples up to the shown one that the consistency tests average.")
-            self.chart = gui.add_uplot((np.zeros(2), np.zeros(2)), (viser.uplot.Series(label="x"),
-                                                                    viser.uplot.Series(label="y")), aspect=1.2)
+            self.chart = gui.add_uplot(scope.placeholder(0.0, 1.0, len(ellipse_series()) - 1), ellipse_series(),
+                                       legend=viser.uplot.Legend(show=False), padding=scope.PADDING, aspect=1.2)
             self.readouts = gui.add_markdown("")
             self.q_scale = gui.add_number("Branch Q ×", initial_value=10.0, min=1e-6, max=1e6)
             self.r_scale = gui.add_number("Branch R ×", initial_value=1.0, min=1e-6, max=1e6)
@@ -172,8 +203,9 @@ class FilterDebugger:
                                                 hint="Reruns the filter from here with Q and R scaled, on the same "
                                                      "measurements and inputs (the plant stays as recorded).")
             self.keep_drop = gui.add_button_group("Branch", ("Keep", "Drop"))
-            self.overlay = gui.add_uplot((np.zeros(2), np.zeros(2)), (viser.uplot.Series(label="t"),
-                                                                      viser.uplot.Series(label="x")), aspect=1.6)
+            self.overlay = gui.add_uplot(scope.placeholder(0.0, 1.0, len(filter_branch.SERIES) - 1),
+                                         filter_branch.SERIES, legend=viser.uplot.Legend(show=True),
+                                         padding=scope.PADDING, aspect=1.6)
             self.branch_text = gui.add_markdown("")
             self.text = gui.add_markdown("")
         moves = {"◀ 10": -10, "◀ 1": -1, "1 ▶": 1, "10 ▶": 10}
@@ -221,16 +253,14 @@ class FilterDebugger:
             return
         row = self.row()
         data, options = ellipse_chart(self.history, row, self.pairs[self.pair.options.index(self.pair.value)])
-        self.chart.series, self.chart.axes, self.chart.data = options["series"], options["axes"], data
-        self.chart.scales, self.chart.title = options["scales"], options["title"]
-        self.chart.legend, self.chart.padding = options["legend"], options["padding"]
+        self.chart.axes, self.chart.scales, self.chart.title = options["axes"], options["scales"], options["title"]
+        self.chart.data = data
         self.text.content = equations(self.history, row)
         self.readouts.content = consistency_text(self.history, row, int(self.window.value))
         pair = self.pairs[self.pair.options.index(self.pair.value)]
         data, options = filter_branch.overlay_chart(self.history, row, pair[0], self.rerun, int(self.horizon.value))
-        self.overlay.series, self.overlay.axes, self.overlay.data = options["series"], options["axes"], data
-        self.overlay.scales, self.overlay.title = options["scales"], options["title"]
-        self.overlay.legend, self.overlay.padding = options["legend"], options["padding"]
+        self.overlay.axes, self.overlay.scales, self.overlay.title = options["axes"], options["scales"], options["title"]
+        self.overlay.data = data
 
     def show_branch(self) -> None:
         if self.history is None:
