@@ -8,6 +8,8 @@
     python -m app list [--json]                exercises and their parameters
     python -m app run NAME [--set N=V ...] [--duration S] [--seed N] [--data FILE] [--json]
     python -m app run --code KN-7Q3M-X9TA-HPRW [--set N=V ...] [--json]   a saved experiment, headless
+    python -m app run NAME --filter-history FROM:TO [--branch q_scale=10@SAMPLE] [--json]
+                                               the Kalman filter's history (and a branch), headless
     python -m app save NAME [--set N=V ...] [--data FILE]        save an experiment, print its code
     python -m app bench [--json] [--browser]   throughput benchmark; --browser: slider-to-readout latency
     python -m app reproduce [--json] [--quick] [--html DIR] [--exercise NAME ...]
@@ -95,6 +97,12 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--data", default=None, metavar="FILE",
                      help="data file for exercises that take one (e.g. a recording CSV)")
     run.add_argument("--json", action="store_true", help="print JSON")
+    run.add_argument("--filter-history", default=None, metavar="FROM:TO",
+                     help="instead of the metrics: the Kalman filter at samples FROM ... TO-1 (priors, gains, "
+                          "innovations, posteriors, true state, measurement; NEES/NIS with 95%% bounds)")
+    run.add_argument("--branch", default=None, metavar="SETTINGS@SAMPLE",
+                     help="with --filter-history: the filter rerun from SAMPLE (or t=SECONDS) with Q, R scaled "
+                          "on the same measurements, e.g. q_scale=10@2050 or q_scale=10,r_scale=0.5@t=0.1")
     save = sub.add_parser("save", help="save an experiment (e.g. an instructor's preset) and print its code")
     save.add_argument("exercise")
     save.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",

@@ -168,6 +168,8 @@ def command_run(args) -> int:
     shown = {name: value for name, value in values.items() if name != "data"}
     if data_file is not None:
         shown["data"] = args.data or data_file[0]
+    if args.filter_history is not None or args.branch is not None:
+        return filter_history(args, exercise, values, shown)
     result = {"exercise": exercise.name, "parameters": shown,
               "model": exercise.model(values), "metrics": exercise.metrics(values, duration)}
     if saved is not None:
@@ -182,6 +184,17 @@ def command_run(args) -> int:
         print(f"error: metric {bad[0]} is not finite" + (f" (and {len(bad) - 1} more)" if len(bad) > 1 else "")
               + " and no stop status explains it", file=sys.stderr)
         return NOT_FINITE
+    return 0
+
+
+def filter_history(args, exercise, values: dict, shown: dict) -> int:
+    """``run --filter-history FROM:TO [--branch ...]``: the filter's history instead of the metrics."""
+    from app.commands import filter_debug
+    if args.filter_history is None:
+        raise ParameterError("--branch needs --filter-history FROM:TO (the samples the branch is printed for)")
+    result = {"exercise": exercise.name, "parameters": shown,
+              **filter_debug.report(exercise, values, args.filter_history, args.branch)}
+    print(filter_debug.dumps(result, jsonable) if args.json else filter_debug.text(result))
     return 0
 
 

@@ -35,10 +35,11 @@ import viser
 from app.infra import layout
 from app.infra.access import Limits
 from app.infra.store import Store
-from app.panels import entry, scope, worksheets
+from app.panels import entry, filter_branch, scope, worksheets
 from app.panels.actions import ActionPanel
 from app.panels.docks import Docks
 from app.panels.export import ExportButtons
+from app.panels.filter_debugger import FilterDebugger
 from app.panels.inspector import FilterInspector
 from app.panels.live import LivePlots
 from app.panels.plots import plot_chart
@@ -97,6 +98,7 @@ class LabSession:
         self.scene = None                         # the exercise's 3D view (None: it has none)
         self.stream: Stream | None = None
         self.inspector: FilterInspector | None = None
+        self.debugger: FilterDebugger | None = None
         self.download_note = None                 # what the exercise's download button did
         self.worker.start(lambda: self._work(exercise))
 
@@ -264,6 +266,8 @@ class LabSession:
         buttons.on_click(on("buttons", lambda: self._on_button(buttons.value)))
         self.status.add_speed(gui)                # filled in while it runs
         self.inspector = FilterInspector.add(gui, self.state.simulation, on("inspector step", self._step_one))
+        self.debugger = FilterDebugger.add(gui, self.state.simulation, on, keep=lambda q, r, model: filter_branch.keep(
+            self.state.exercise, self.state.values_now(), model, q, r, self.controls.follow))
         ActionPanel(gui, exercise, on, self.state.values_now, self._still_current(), self.gui_lock,
                     self.worker, self.client, plot_chart)   # the exercise's buttons, if any
         if self.scene is not None:
@@ -417,6 +421,8 @@ class LabSession:
             with self.state.lock:
                 running, simulation = self.state.running, self.state.simulation
                 self.inspector.show(running, simulation)
+                if self.debugger is not None:
+                    self.debugger.show(running, simulation)
 
     def _request_analysis(self) -> None:
         """Ask the analysis thread for the current values; a newer request supersedes an older one."""
