@@ -1,6 +1,7 @@
 """Command line of the lab.
 
-    python -m app [--host H] [--port P] [--exercise NAME] [--data-dir DIR] [--token T | --token-file F]
+    python -m app [--host H] [--port P] [--exercise NAME] [--data-dir DIR | --database URL]
+                  [--token T | --token-file F]
                   [--max-tabs N] [--allow-origin URL ...] [--trusted-proxy A ...]
                                                start the browser lab (default; also ``serve``)
     python -m app serve --workers N [same options] [--worker-ports FIRST]   N lab processes behind HAProxy
@@ -9,6 +10,7 @@
     python -m app run NAME [--set N=V ...] [--duration S] [--seed N] [--data FILE] [--json]
     python -m app run --code KN-7Q3M-X9TA-HPRW [--set N=V ...] [--json]   a saved experiment, headless
     python -m app save NAME [--set N=V ...] [--data FILE]        save an experiment, print its code
+        (run, save and the assignment commands take --data-dir DIR or --database postgresql://...)
     python -m app bench [--json] [--browser]   throughput benchmark; --browser: slider-to-readout latency
     python -m app reproduce [--json] [--quick] [--html DIR] [--exercise NAME ...]
                                                every paper claim measured; exit 1 if one fails
@@ -29,6 +31,7 @@ from pathlib import Path
 
 from app.commands import headless
 from app.infra import access
+from app.infra.database import DATABASE_VARIABLE
 from lab_modules.parameters import ParameterError
 
 USAGE_ERROR = 2
@@ -46,6 +49,7 @@ def _serve_options(parser: argparse.ArgumentParser, defaults: bool) -> None:
                         help="exercise a new tab opens on (default kalman_noise; tabs can switch)")
     parser.add_argument("--data-dir", default=default(None), metavar="DIR",
                         help="where saved experiments live (default ~/.local/share/amb-lab)")
+    _database_option(parser, default(None))
     parser.add_argument("--token", default=default(None),
                         help="class token asked of every new tab when not on loopback (default: generated; "
                              "the process list shows it to every user: prefer --token-file or "
@@ -63,8 +67,16 @@ def _serve_options(parser: argparse.ArgumentParser, defaults: bool) -> None:
                              "e.g. https://lab.example.org behind a proxy")
 
 
+def _database_option(parser: argparse.ArgumentParser, default) -> None:
+    parser.add_argument("--database", default=default, metavar="URL",
+                        help="keep experiments, assignments and submissions in PostgreSQL, shared by every lab "
+                             "process on every machine: postgresql://USER:PASSWORD@HOST:PORT/DB (default: "
+                             f"${DATABASE_VARIABLE}, else SQLite in --data-dir)")
+
+
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="python -m app", description="AMB estimation lab")
+    # no abbreviations: the main parser would read a subcommand's --data as an ambiguous --data-dir/--database
+    parser = argparse.ArgumentParser(prog="python -m app", description="AMB estimation lab", allow_abbrev=False)
     _serve_options(parser, defaults=True)
     sub = parser.add_subparsers(dest="command")
     serve = sub.add_parser("serve", help="start the browser lab (the default); --workers N: N processes "
@@ -88,6 +100,7 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("exercise", nargs="?", help="exercise name (or --code)")
     run.add_argument("--code", default=None, help="run a saved experiment (e.g. KN-7Q3M-X9TA-HPRW)")
     run.add_argument("--data-dir", default=None, metavar="DIR", help="where saved experiments live")
+    _database_option(run, None)
     run.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                      help="override a parameter (repeatable)")
     run.add_argument("--duration", default=None, help="simulated seconds (default: the exercise's)")
@@ -101,6 +114,7 @@ def _parser() -> argparse.ArgumentParser:
                       help="a parameter value (repeatable; the rest keep their defaults)")
     save.add_argument("--data", default=None, metavar="FILE", help="a recording for exercises that take one")
     save.add_argument("--data-dir", default=None, metavar="DIR", help="where saved experiments live")
+    _database_option(save, None)
     bench = sub.add_parser("bench", help="closed-loop throughput benchmark")
     bench.add_argument("--json", action="store_true", help="print JSON")
     bench.add_argument("--seconds", default="2.0", help="simulated seconds per measurement (0.1 ... 60)")
