@@ -111,3 +111,19 @@ def test_an_unreachable_or_malformed_database_is_one_line(capsys):
         and err.count("\n") == 1
     assert main(["serve", "--database", "sqlite:///x", "--port", "8081"]) == 2
     assert "not a PostgreSQL URL" in capsys.readouterr().err
+
+
+def test_a_dropped_postgresql_connection_is_one_line_then_opened_again(postgres_server):
+    """The server restarts (here: the lab's connection is ended from outside): one access fails
+    with one line, the next one connects again and works."""
+    import psycopg
+    url = postgres_server.new_database()
+    store = open_store(url)
+    code = store.save("kalman_noise", {"seed": 1})
+    with psycopg.connect(url, autocommit=True) as admin:
+        admin.execute("SELECT pg_terminate_backend(pid) FROM pg_stat_activity WHERE datname = current_database() "
+                      "AND pid <> pg_backend_pid()")
+    with pytest.raises(StoreUnavailable, match="^the PostgreSQL server of the saved experiments cannot be reached"):
+        store.load(code)
+    assert store.load(code).parameters == {"seed": 1}
+    store.close()
