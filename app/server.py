@@ -23,7 +23,8 @@ from pathlib import Path
 import viser
 
 from app.infra import access, traffic
-from app.infra.store import Store, StoreError
+from app.infra.database import chosen_database, open_store
+from app.infra.store import StoreError
 from app.tab.session import LabSession
 from lab_modules.exercises import get
 from lab_modules.parameters import ParameterError
@@ -42,6 +43,7 @@ class Settings:
     port: int = 8080
     exercise: str = "kalman_noise"
     data_dir: Path | None = None
+    database: str | None = None            # PostgreSQL URL (None: SQLite in data_dir)
     token: str | None = None               # None: no token asked (loopback only)
     token_source: str = ""                 # "generated", "from --token", ...
     origins: access.OriginPolicy = field(default_factory=access.OriginPolicy)
@@ -53,11 +55,15 @@ class Settings:
         host = access.check_host(args.host)
         port = access.check_port(args.port)
         get(args.exercise)
+        try:
+            database = chosen_database(args.database, os.environ)
+        except StoreError as error:
+            raise ParameterError(str(error)) from None
         token, source = access.chosen_token(args.token, args.token_file, os.environ)
         if token is None and not access.is_loopback(host):
             token, source = access.new_token(), "generated"
         return cls(host=host, port=port, exercise=args.exercise,
-                   data_dir=Path(args.data_dir) if args.data_dir else None, token=token,
+                   data_dir=Path(args.data_dir) if args.data_dir else None, database=database, token=token,
                    token_source=source, origins=access.OriginPolicy(args.allow_origin or (), host),
                    max_tabs=access.check_max_tabs(args.max_tabs),
                    trusted_proxies=frozenset(access.check_host(a) for a in args.trusted_proxy or ()))
@@ -137,7 +143,7 @@ def serve(settings: Settings) -> int:
     starting on ``settings.exercise`` (each tab can switch).  Returns the exit status."""
     try:
         access.check_bindable(settings.host, settings.port)
-        store = Store(settings.data_dir, log_failures=True)
+        store = open_store(settings.database, settings.data_dir, log_failures=True)
     except (ParameterError, StoreError) as error:
         print(f"error: {error}", file=sys.stderr)
         return USAGE_ERROR
@@ -208,7 +214,7 @@ def serve(settings: Settings) -> int:
     print(f"AMB estimation lab: open {url} in a browser (Ctrl+C to stop)", flush=True)
     for line in settings.token_lines():
         print(line, flush=True)
-    print(f"Saved experiments: {store.path}; at most {settings.max_tabs} tabs (--max-tabs)", flush=True)
+    print(f"Saved experiments: {store.where}; at most {settings.max_tabs} tabs (--max-tabs)", flush=True)
     try:
         while True:
             time.sleep(RETURN_MEMORY_EVERY_S)

@@ -13,6 +13,7 @@ import stat
 import sys
 from pathlib import Path
 
+from app.infra.database import chosen_database, open_store
 from app.infra.store import Store, StoreError
 from lab_modules.exercises import get, registry
 from lab_modules.parameters import ParameterError
@@ -119,9 +120,10 @@ def read_data_file(exercise, path) -> tuple[str, bytes] | None:
     return Path(path).name, content
 
 
-def _store(data_dir) -> Store:
+def open_store_of(args) -> Store:
+    """The store of a headless command's ``--database`` or ``--data-dir``; ``ParameterError`` (exit 2)."""
     try:
-        return Store(data_dir)
+        return open_store(chosen_database(args.database, os.environ), args.data_dir)
     except StoreError as error:
         raise ParameterError(str(error)) from None
 
@@ -150,7 +152,7 @@ def command_run(args) -> int:
     saved = None
     if args.code is not None:
         try:
-            saved = _store(args.data_dir).load(args.code)
+            saved = open_store_of(args).load(args.code)
         except StoreError as error:
             raise ParameterError(str(error)) from None
         if args.exercise is not None and args.exercise != saved.exercise:
@@ -205,7 +207,7 @@ def command_save(args) -> int:
     values = exercise.resolve({**overrides, "data": exercise.load_data(*data_file) if data_file else None})
     name, content = data_file or (None, None)
     try:
-        code = _store(args.data_dir).save(exercise.name, values, name, content)
+        code = open_store_of(args).save(exercise.name, values, name, content)
     except StoreError as error:
         raise ParameterError(str(error)) from None
     print(code)
