@@ -33,6 +33,7 @@ import numpy as np
 
 from lab_modules.claims import Claim
 from lab_modules.estimators.ripple_inductance import fit, predicted_sigma_inductance_h
+from lab_modules.loops.self_sensing_levitation import LevitatedLoop
 from lab_modules.loops.self_sensing_loop import (
     COLUMN,
     COLUMNS,
@@ -45,6 +46,7 @@ from lab_modules.plants.self_sensing_ball import RIG
 from lab_modules.scenes.self_sensing import SelfSensingScene
 
 from . import Action, Analysis, Chart, Exercise, Plot, PoleCategory, Series
+from . import _self_sensing_levitation as levitation
 
 SAMPLE_TIMES_US = ("0.5", "1", "2")
 PWM_MODES = ("fixed T_pwm", "T_pwm = 1024 T_a")
@@ -116,7 +118,7 @@ PARAMETERS = (
       group="Run"),
     P("time_scale", "Time scale", "×", 0.25, 0.01, 2.0,
       "Simulated seconds per wall-clock second in the browser (1 = real time).", log=True, group="Run"),
-)
+) + levitation.PARAMETERS
 
 
 def setup(values: dict, **changes) -> SelfSensingSetup:
@@ -183,7 +185,8 @@ class SelfSensingSimulation:
 
     def __init__(self, values: dict, loop: SelfSensingLoop | None = None):
         self.values = dict(values)
-        self.loop = loop or SelfSensingLoop(setup(values), seed=int(values["seed"]))
+        self.loop = loop or (LevitatedLoop(setup(values), levitation.loop_control(values), seed=int(values["seed"]))
+                             if levitation.levitated(values) else SelfSensingLoop(setup(values), seed=int(values["seed"])))
         self.sample_time_s = self.loop.setup.period_s
         self.wall_s, self.simulated_s = 0.0, 0.0
         self.ripple = (np.empty((0, 5)), np.empty(0))    # (raw samples of ≤ 2 periods, their duties)
@@ -196,6 +199,7 @@ class SelfSensingSimulation:
         newest, raw = self.loop.run(min(n_steps, RIPPLE_PERIODS), raw_samples=RIPPLE_PERIODS * n)
         rows = np.concatenate([older, newest])
         self.wall_s += time.perf_counter() - start
+        n_steps = len(rows)                  # fewer once a levitated ball has left its reference
         self.simulated_s += n_steps * self.sample_time_s
         if n_steps:
             kept, duties = self.ripple
@@ -205,7 +209,7 @@ class SelfSensingSimulation:
         return np.column_stack([t, rows, derived(rows, self.values["position_from"])])
 
     def status_message(self) -> str:
-        return ""
+        return self.loop.stop_message
 
     def realtime_factor(self) -> float:
         return self.simulated_s / self.wall_s if self.wall_s > 0 else float("nan")
@@ -343,7 +347,9 @@ class SelfSensing(Exercise):
             band=("inductance_mean_h", "sigma_inductance_mean_h")),
         Chart("Gap", "mm", (
             Series("estimated ŝ", "gap_shown_m", 1e3, "#d62728"),
-            Series("true s", "gap_true_m", 1e3, "#000000")), band=("gap_shown_m", "sigma_gap_shown_m")),
+            Series("true s", "gap_true_m", 1e3, "#000000"),
+            Series("reference r (levitated)", "gap_reference_m", 1e3, "#7f7f7f")),
+              band=("gap_shown_m", "sigma_gap_shown_m")),
         Chart("Gap error ŝ − s ±3σ̂", "µm", (Series("ŝ − s", "gap_error_m", 1e6, "#d62728"),),
               band=("zero", "sigma_gap_shown_m")),
         Chart("Predicted spread σ̂(L̂)", "µH", (
@@ -418,7 +424,13 @@ class SelfSensing(Exercise):
                  "is from those at gap 1. *Run Monte-Carlo* (controls, left) checks σ̂(L̄) over "
                  f"{MONTE_CARLO_SEEDS} seeds × {MONTE_CARLO_PERIODS} periods.")]
         quick = runs["gap_1"]
-        return Analysis(readouts, poles, notes, self.ripple_plots(values) + [histogram(
+        plots = []
+        if levitation.levitated(values):
+            extra, more_notes, plots = levitation.analysis(
+                s, values, statistics(runs["gap_1"])["predicted_sigma_position_um"] * 1e-6)
+            readouts += extra
+            notes += more_notes
+        return Analysis(readouts, poles, notes, plots + self.ripple_plots(values) + [histogram(
             (quick[:, COLUMN["inductance_mean_h"]] - quick[:, COLUMN["inductance_true_h"]])
             / quick[:, COLUMN["sigma_inductance_mean_h"]], f"{s.gap_1_m * 1e3:g} mm (300 periods)")])
 
@@ -477,6 +489,10 @@ class SelfSensing(Exercise):
                 ("Mean predicted σ̂(L̄) (eq. 31)", st["predicted_sigma_inductance_uh"], "µH"),
             ], {}, [progress, *notes], [histogram(normalised, f"{gap_mm:g} mm")])
 
+    def open_loops(self, values: dict) -> dict:
+        """With feedback on ŝ: the position loop at gap 1, broken at the current command."""
+        return levitation.open_loops(setup(values), values)
+
     def simulation(self, values: dict) -> SelfSensingSimulation:
         return SelfSensingSimulation(values)
 
@@ -491,7 +507,9 @@ class SelfSensing(Exercise):
         a new PWM period length starts afresh."""
         new = setup(values)
         old = simulation.loop
-        if new.samples_per_period != old.setup.samples_per_period or new.sample_time_s != old.setup.sample_time_s:
+        if (new.samples_per_period != old.setup.samples_per_period or new.sample_time_s != old.setup.sample_time_s
+                or levitation.levitated(values) != isinstance(old, LevitatedLoop)
+                or isinstance(old, LevitatedLoop) and old.control != levitation.loop_control(values)):
             return self.simulation(values)
         carried = SelfSensingSimulation(values, old.retuned(new))
         carried.ripple = simulation.ripple
@@ -563,6 +581,8 @@ class SelfSensing(Exercise):
             "moving_periods": int(np.sum(moving)),
             "periods": len(rows),
         }
+        if levitation.levitated(values):
+            result["levitation"] = levitation.metrics(setup(values), values, duration_s)
         result["realtime_factor"] = simulation.realtime_factor()
         result["duration_s"] = n_periods * simulation.sample_time_s
         result["status"] = "ok"
@@ -573,6 +593,10 @@ EXERCISE = SelfSensing()
 
 QUIET = {"sigma_current_ma": 0.0, "sigma_voltage_mv": 0.0}
 FIXED_4 = {**QUIET, "trajectory": TRAJECTORIES[1]}
+
+
+LEVITATED = {"feedback": levitation.FEEDBACK[1], "trajectory": TRAJECTORIES[1]}
+LEVITATION_RUN_S = 5.0         # about 60 closed-loop time constants: the spread measured to a few per cent
 
 
 def _within(value: float, relative: float) -> tuple[float, float]:
@@ -667,4 +691,22 @@ EXERCISE.claims = (
           "smaller for more samples and smaller T_s", "predicted_sigma_position_um.gap_1", _within(24.7, 0.03),
           "µm", "half the period: the same samples over half the ramp, σ doubles",
           settings={"sample_time_us": "0.5", "pwm_mode": PWM_MODES[1]}),
+    Claim("lab target (paper 001's sensorless bearing, loop closed on ŝ)", "ball held at 4 mm on ŝ alone, "
+          "f_c = 6 Hz, σ(i) = 1 mA, σ(v) = 15 mV", "not given (the paper estimates, it does not levitate)",
+          "levitation.held_s", (LEVITATION_RUN_S - 0.01, None), "s",
+          "the whole run without leaving the reference by 1 mm", settings=LEVITATED, duration_s=LEVITATION_RUN_S),
+    Claim("lab target (loop on ŝ)", "true-gap std / prediction from the estimate's spread through the linear loop",
+          "not given", "levitation.gap_std_to_predicted", (0.8, 1.2), "",
+          "discrete Lyapunov equation of the loop linearised at 4 mm, fed the measured std of ŝ − s as white "
+          "noise; the first 0.1 s left out", settings=LEVITATED, duration_s=LEVITATION_RUN_S),
+    Claim("lab target (loop on ŝ)", "true-gap std / prediction from the estimator's own σ̂(ŝ) (eq. 32)",
+          "not given", "levitation.gap_std_to_eq32_prediction", (0.8, 1.35), "",
+          "wider than the row above: in the loop the spread of ŝ − s exceeds the mean σ̂(ŝ) by about 7 % (the "
+          "current and the ball change inside a period)", settings=LEVITATED, duration_s=LEVITATION_RUN_S),
+    Claim("lab target (loop on ŝ)", "largest f_c a noise-free run holds / the analysis's stability limit",
+          "not given (lab: limit 23.2 Hz at 4 mm)", "levitation.nonlinear_limit_to_predicted", (0.9, 1.1), "",
+          "bisection of 1 s runs between 0.8 and 1.2 × the limit; the limit from the loop with ŝ one period "
+          "old, averaged over it and the switching instant moved", settings=LEVITATED),
+    Claim("lab target (loop on ŝ)", "a run at 1.1 × the predicted limit stops with its message", "not given",
+          "levitation.stops_at_1_1_limit", (1.0, 1.0), "", "noise free, 1 s", settings=LEVITATED),
 )

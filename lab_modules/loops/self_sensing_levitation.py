@@ -59,6 +59,7 @@ class LevitationControl(NamedTuple):
     bandwidth_rad_s: float           # ω_c: the delay-free loop's triple pole at −ω_c [rad/s]
     derivative_filter_ratio: float   # n_f: the derivative filter's corner n_f ω_c [-]
     stop_deviation_m: float          # the run stops when |s − r| exceeds this [m]
+    shortest_phase: float            # each phase keeps at least this share of the period [-]
 
 
 @njit(cache=True, nogil=True)
@@ -118,7 +119,7 @@ def run_levitated(first_period, n_periods, state, constants, setup, control, rng
     fit_2 = np.empty(7)
     noise = np.empty(2 * n + 2)
     true_i = np.empty(n)
-    min_on = 2 * trim + 3
+    min_on = max(2 * trim + 3, int(control.shortest_phase * n))
     done = n_periods
     for p in range(n_periods):
         t0 = (first_period + p) * period_s
