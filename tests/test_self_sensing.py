@@ -234,7 +234,7 @@ def test_headless_run_json_has_the_metrics():
 # -- geometry, Fig. 2's gains, eq. 25 during the moves ------------------------------------------------
 def test_geometry_controls_default_to_the_lab_rig_and_reach_the_loop():
     assert setup(EXERCISE.resolve({})).rig == RIG
-    s = setup(EXERCISE.resolve({"turns": 900, "gap_area_mm2": 35.0, "leakage_reluctance": 6e7}))
+    s = setup(EXERCISE.resolve({"turns": 900, "gap_area_cm2": 0.35, "leakage_reluctance": 6e7}))
     assert (s.rig.turns, s.rig.gap_area_m2, s.rig.leakage_reluctance_per_h) == (900, pytest.approx(35e-6), 6e7)
     rows = SelfSensingSimulation(EXERCISE.resolve({**QUIET, "turns": 900})).advance(5)
     assert rows[-1, 1 + COLUMN["inductance_true_h"]] == pytest.approx(float(RIG.inductance_h(4e-3)) * 1.5**2,

@@ -29,9 +29,9 @@ PARAMETERS = (
     P("turns", "Turns N", "", 600, 400, 1200,
       "Coil turns (eq. 2: L = N²/R). The lab's set: 600. More turns: less current for the weight, a slower "
       "coil (L ∝ N²) and, at the same current noise, a larger σ(ŝ).", integer=True, step=10, group="Geometry"),
-    P("gap_area_mm2", "Gap area A_s", "mm²", RIG.gap_area_m2 * 1e6, 35.0, 280.0,
-      "Effective area of the air gap (eq. 1: ∂R_s/∂s = 1/(μ0 A_s)). The lab's set: 70 mm². A small A_s "
-      "needs more current: past the bridge's duty limits the ball is not carried.", log=True, step=0.5,
+    P("gap_area_cm2", "Gap area A_s", "cm²", 0.7, 0.35, 2.8,
+      "Effective area of the air gap (eq. 1: ∂R_s/∂s = 1/(μ0 A_s)). The lab's set: 0.70 cm². A small A_s "
+      "needs more current: past the bridge's duty limits the ball is not carried.", log=True, step=0.01,
       group="Geometry"),
     P("leakage_reluctance", "Leakage reluctance R_l", "1/H", RIG.leakage_reluctance_per_h, 5e6, 1e9,
       "Reluctance of the leakage path parallel to gap and ball (eq. 1-2). The lab's set: 1.5·10⁷ H⁻¹; "
@@ -42,7 +42,7 @@ PARAMETERS = (
 def rig(values: dict) -> SelfSensingBall:
     """The rig of the parameter values (the lab's set with N, A_s and R_l of the controls)."""
     si = in_si(PARAMETERS, values)
-    return replace(RIG, turns=float(values["turns"]), gap_area_m2=si["gap_area_mm2"],
+    return replace(RIG, turns=float(values["turns"]), gap_area_m2=si["gap_area_cm2"],
                    leakage_reluctance_per_h=float(values["leakage_reluctance"]))
 
 

@@ -190,7 +190,7 @@ class LinearLoop(NamedTuple):
     open_loop: control.StateSpace     # L at the plant input (the current command), S = 1/(1 + L)
     closed: np.ndarray                # the closed loop's state matrix
     noise_input: np.ndarray           # where σ(ŝ) enters: the delayed estimate (unit column)
-    period_s: float
+    period_s: float                   # T_pwm: one step of the loop [s]
 
 
 def linear_loop(setup: SelfSensingSetup, control_: LevitationControl, gap_m: float) -> LinearLoop:
