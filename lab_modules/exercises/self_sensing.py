@@ -262,7 +262,7 @@ class SelfSensing(Exercise):
               band=("gap_shown_m", "sigma_gap_shown_m")),
         Chart("Gap error ŝ − s ±3σ̂", "µm", (Series("ŝ − s", "gap_error_m", 1e6, "#d62728"),),
               band=("zero", "sigma_gap_shown_m")),
-        Chart("Gains from L̄ (eq. 22, Fig. 2): μ̂ = L̄_m/L, η̂ = L/L̄_m", "", (
+        Chart("Gains from L̄ (eq. 22, Fig. 2): μ̂ = L̄_m/L, η̂ = L/L̄_m", "1", (
             Series("μ̂ = L̄_m/L", "inductance_ratio", 1.0, "#d62728"),
             Series("η̂ = L/L̄_m", "voltage_gain_estimate", 1.0, "#1f77b4"),
             Series("set μ/η", "gain_ratio_set", 1.0, "#7f7f7f"))),
