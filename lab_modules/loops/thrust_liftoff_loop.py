@@ -254,10 +254,12 @@ class ThrustSetup:
     start_position_m: float = -0.75e-3
     sensor_noise_correlation_s: float = 0.0        # > 0: first-order coloured sensor noise (std stays σ_v)
     noise_on: bool = True                          # False: the same run without any noise draws
+    filter_exact_model: bool = False               # True: the filter on the exact ZOH matrices, not eq. 9-11
 
     @property
     def design(self) -> ThrustFilterDesign:
-        return ThrustFilterDesign(self.filter_q_n2, self.filter_r_factor * self.sensor_noise_m**2, self.bearing)
+        return ThrustFilterDesign(self.filter_q_n2, self.filter_r_factor * self.sensor_noise_m**2, self.bearing,
+                                  self.filter_exact_model)
 
     @property
     def gravity_n(self) -> float:
