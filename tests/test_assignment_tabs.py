@@ -19,6 +19,8 @@ import pytest
 from app.cli import main
 from app.infra import coursework
 from app.infra.database import open_store
+from app.panels.assignment import FAILED, PASSED
+from app.panels.text import escaped
 from lab_modules.evaluation import assignments
 from tests.wsclient import RawTab, lab_process, run_async
 
@@ -124,7 +126,7 @@ def test_a_student_joins_from_the_link_and_is_graded_on_the_server(tmp_path, cap
     assert [r.passed for r in regraded] == [r["passed"] for r in submission.results]
     assert submission.score == assignments.score(regraded)
     for result in regraded:
-        assert f"`{result.metric}`" in shown and ("✅ pass" if result.passed else "❌ fail") in shown
+        assert f"| {escaped(result.metric)} " in shown and (PASSED if result.passed else FAILED) in shown
     assert f"**Score {submission.score:g}/4**" in shown
 
 

@@ -14,15 +14,20 @@ from lab_modules.formatting import number
 
 DRAWN_HINT = "Your own plant in this assignment: drawn for you from your id, so it cannot be changed."
 LOCKED_HINT = "Fixed by your instructor in this assignment."
+PASSED, FAILED = "✓ pass", "✗ fail"      # signs every font has (emoji are boxes without an emoji font)
 SUBMIT_HINT = ("Grades the settings now in this tab: the lab runs your design again on the server, on your "
                "plant, and holds each result to its bound. You may submit again until the deadline.")
 
 
+def shown_relation(relation: str) -> str:
+    return {"<=": "≤", ">=": "≥"}[relation]
+
+
 def specs_markdown(assignment: Assignment) -> str:
     """The specs to meet, the deadline and which submission counts."""
-    rows = "\n".join(f"| `{spec.metric}` | {spec.relation} {number(spec.bound)} | {number(spec.points)} |"
-                     for spec in assignment.specs)
-    return (f"| spec | bound | points |\n|---|---|---|\n{rows}\n\n"
+    rows = "\n".join(f"| {escaped(spec.metric)} | {shown_relation(spec.relation)} {number(spec.bound)} | "
+                     f"{number(spec.points)} |" for spec in assignment.specs)
+    return (f"| spec | bound | points |\n|---|---|---:|\n{rows}\n\n"
             f"Deadline: {shown_deadline(assignment.deadline)}; the {assignment.counts} submission counts "
             f"({number(assignment.points)} points).")
 
@@ -30,10 +35,10 @@ def specs_markdown(assignment: Assignment) -> str:
 def results_markdown(results: list[dict], score: float, points: float) -> str:
     """Each spec's value on the student's plant and whether it passed (as graded on the server)."""
     rows = "\n".join(
-        f"| `{r['metric']}` | {'—' if r['value'] is None else number(r['value'])} | "
-        f"{r['relation']} {number(r['bound'])} | {'✅ pass' if r['passed'] else '❌ fail'} | "
+        f"| {escaped(r['metric'])} {shown_relation(r['relation'])} {number(r['bound'])} | "
+        f"{'—' if r['value'] is None else number(r['value'])} | {PASSED if r['passed'] else FAILED} "
         f"{number(r['points'] if r['passed'] else 0)}/{number(r['points'])} |" for r in results)
-    return (f"| spec | value | bound | result | points |\n|---|---|---|---|---|\n{rows}\n\n"
+    return (f"| spec | value | result |\n|---|---:|---|\n{rows}\n\n"
             f"**Score {number(score)}/{number(points)}**")
 
 

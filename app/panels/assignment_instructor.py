@@ -11,7 +11,7 @@ from collections.abc import Callable
 
 from app.infra.assignment_records import Submission
 from app.infra.coursework import Standing
-from app.panels.assignment import specs_markdown
+from app.panels.assignment import FAILED, PASSED, shown_relation, specs_markdown
 from app.panels.text import escaped
 from lab_modules.evaluation.assignments import Assignment
 from lab_modules.formatting import number
@@ -41,7 +41,7 @@ class InstructorGate:
 
 def _result_cell(result: dict) -> str:
     value = "—" if result["value"] is None else number(result["value"])
-    return f"{value} {'✅' if result['passed'] else '❌'}"
+    return f"{value} {PASSED if result['passed'] else FAILED}"
 
 
 def standings_markdown(assignment: Assignment, rows: list[Standing]) -> str:
@@ -49,7 +49,7 @@ def standings_markdown(assignment: Assignment, rows: list[Standing]) -> str:
     spec's value (✅/❌) in the submission it comes from."""
     if not rows:
         return "*No student has opened the assignment yet.*"
-    specs = [f"`{spec.metric}` {spec.relation} {number(spec.bound)}" for spec in assignment.specs]
+    specs = [f"{escaped(spec.metric)} {shown_relation(spec.relation)} {number(spec.bound)}" for spec in assignment.specs]
     head = f"| student | variant | submissions | score | {' | '.join(specs)} |\n|---|---|---|---|" + "---|" * len(specs)
     lines = []
     for row in rows:
@@ -72,7 +72,7 @@ class InstructorPage:
     def __init__(self, gui, assignment: Assignment, code: str, on, export: Callable[[str], None],
                  open_submission: Callable[[str], None]):
         gui.main_panel.set_width(PAGE_WIDTH_PX)
-        gui.add_markdown(f"## {escaped(assignment.title)} ({escaped(code)})\nExercise *{escaped(assignment.exercise)}*. "
+        gui.add_markdown(f"## {escaped(assignment.title)} ({escaped(code)})\nExercise *{escaped(assignment.exercise)}*.\n\n"
                          f"{specs_markdown(assignment)}\n\nThe table follows new submissions by itself.")
         self.standings = gui.add_markdown("")
         exports = gui.add_button_group("Gradebook (CSV)", ("Canvas", "Moodle"))
