@@ -63,6 +63,9 @@ def _serve_options(parser: argparse.ArgumentParser, defaults: bool) -> None:
                              f"${access.TOKEN_VARIABLE})")
     parser.add_argument("--token-file", default=default(None), metavar="FILE",
                         help="read the class token from the first line of FILE")
+    parser.add_argument("--instructor-token-file", default=default(None), metavar="FILE",
+                        help="read the instructor page's token from the first line of FILE (default: "
+                             f"${access.INSTRUCTOR_TOKEN_VARIABLE}, else generated and printed at start)")
     parser.add_argument("--trusted-proxy", action="append", default=default([]), metavar="ADDRESS",
                         help="a proxy whose X-Forwarded-For names the student's address (repeatable; "
                              "loopback is always trusted), e.g. the balancer in front of several machines")

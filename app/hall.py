@@ -34,7 +34,7 @@ import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
 
-from app.infra.access import TOKEN_VARIABLE, check_bindable, is_address
+from app.infra.access import INSTRUCTOR_TOKEN_VARIABLE, TOKEN_VARIABLE, check_bindable, is_address
 from app.infra.database import DATABASE_VARIABLE, open_store
 from lab_modules.parameters import ParameterError
 
@@ -191,6 +191,7 @@ def worker_environment(settings) -> dict[str, str]:
     environment = {name: value for name, value in os.environ.items() if name != TOKEN_VARIABLE}
     if settings.token is not None:
         environment[TOKEN_VARIABLE] = settings.token
+    environment[INSTRUCTOR_TOKEN_VARIABLE] = settings.instructor_token   # one instructor token for the hall
     if settings.database is not None:                 # one PostgreSQL database for all (its URL may hold a password)
         environment[DATABASE_VARIABLE] = settings.database
     return environment
@@ -281,7 +282,7 @@ def serve_hall(settings, workers: int, first_worker_port: int | None, allow_orig
                 return 1
             print(f"AMB estimation lab: open {shown_url(host, port)} in a browser "
                   f"({workers} lab processes behind HAProxy; Ctrl+C to stop)", flush=True)
-            for line in settings.token_lines():
+            for line in [*settings.token_lines(), settings.instructor_line()]:
                 print(line, flush=True)
             while True:
                 time.sleep(POLL_S)

@@ -283,7 +283,8 @@ def test_a_token_is_generated_off_loopback_and_a_weak_one_is_warned_of(monkeypat
     from app.server import Settings
     monkeypatch.delenv(TOKEN_VARIABLE, raising=False)
     args = argparse.Namespace(host=host, port=8080, exercise="kalman_noise", data_dir=None, token=given,
-                              token_file=None, allow_origin=[], max_tabs="60", trusted_proxy=[], database=None)
+                              token_file=None, allow_origin=[], max_tabs="60", trusted_proxy=[], database=None,
+                              instructor_token_file=None)
     settings = Settings.from_args(args)
     assert settings.token_source == (expected or "")
     lines = " ".join(settings.token_lines())
