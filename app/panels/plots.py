@@ -65,16 +65,14 @@ class AnalysisPlots:
     """The charts of the Analysis tab (one generation of an exercise)."""
 
     def __init__(self, gui, container, atomic, plots):
-        """Add a chart per plot of the first result into ``container`` (the Analysis tab);
-        ``atomic`` batches a chart's changes into one message (``client.atomic``)."""
+        """Add a chart per plot of ``plots`` (the first result; may be none yet) into ``container``
+        (the Analysis tab); ``atomic`` batches a chart's changes into one message (``client.atomic``)."""
         self.gui, self.container, self.atomic = gui, container, atomic
         self.plots, self.plot_shapes = [], []
         for plot in plots:
             data, options = plot_chart(plot)
             self.plots.append(gui.add_uplot(data, **options, aspect=PLOT_ASPECT))
             self.plot_shapes.append(plot_shape(plot))
-        if not plots:
-            gui.add_markdown("*This exercise has no analysis plots.*")
 
     def update(self, plots) -> None:
         """Show ``plots`` (call holding the tab's GUI lock).  A later result of ``analyse`` (or the

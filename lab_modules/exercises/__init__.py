@@ -4,8 +4,11 @@ any of them generically (parameters, scope charts, pole map, readouts)."""
 from __future__ import annotations
 
 import importlib
+import threading
+from collections import OrderedDict
+from collections.abc import Callable, Hashable, Iterator
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Protocol, TypeVar
 
 import numpy as np
 
@@ -61,6 +64,48 @@ class Analysis:
     poles: dict[str, np.ndarray]                      # name -> continuous-equivalent poles [rad/s]
     notes: list[str] = field(default_factory=list)
     plots: list[Plot] = field(default_factory=list)
+
+
+#: The panels of a tab that show an exercise's analysis (``Exercise.analyse_panel``): the readouts
+#: under the scope, the pole maps, and the Analysis tab's readouts and plots.
+SCOPE, POLE_MAP, ANALYSIS = "Scope", "Pole map", "Analysis"
+PANELS = (SCOPE, POLE_MAP, ANALYSIS)
+
+
+def results(result: Analysis | Iterator[Analysis]) -> Iterator[Analysis]:
+    """The results of an ``analyse`` or ``analyse_panel`` call one by one: it returns one ``Analysis``
+    or yields a quick one, then fuller ones (computed as they are asked for)."""
+    if isinstance(result, Analysis):
+        yield result
+    else:
+        yield from result
+
+
+def panels_together(exercise: Exercise, values: dict) -> Iterator[Analysis]:
+    """The parts of ``exercise.analyse_panel`` as one analysis: the Scope's first result at once, then
+    all of it (readouts and notes: the Scope's, then the Analysis tab's; poles: the Pole map's)."""
+    if type(exercise).analyse_panel is Exercise.analyse_panel:
+        raise NotImplementedError(f"exercise {exercise.name!r} implements neither analyse nor analyse_panel")
+    scope = results(exercise.analyse_panel(values, SCOPE))
+    first = next(scope)
+    yield first
+    scope_last = _last(scope, first)
+    parts = {}
+    for panel in (POLE_MAP, ANALYSIS):
+        part = exercise.analyse_panel(values, panel)
+        parts[panel] = scope_last if part is None else _last(results(part))
+    shown = parts[ANALYSIS] is not scope_last
+    yield Analysis(scope_last.readouts + (parts[ANALYSIS].readouts if shown else []), parts[POLE_MAP].poles,
+                   scope_last.notes + (parts[ANALYSIS].notes if shown else []),
+                   scope_last.plots + (parts[ANALYSIS].plots if shown else []))
+
+
+def _last(found: Iterator[Analysis], first: Analysis | None = None) -> Analysis:
+    """The last of ``found`` (``first`` if it holds none)."""
+    last = first
+    for last in found:
+        pass
+    return last
 
 
 @dataclass(frozen=True)
@@ -147,8 +192,26 @@ class Exercise:
     def model(self, values: dict) -> dict:
         raise NotImplementedError
 
-    def analyse(self, values: dict) -> Analysis:
-        raise NotImplementedError
+    def analyse(self, values: dict) -> Analysis | Iterator[Analysis]:
+        """Everything the analysis says at these settings (readouts, poles, notes, static plots); may
+        yield a quick result first, then fuller ones.  Headless runs, reports and tests read it whole;
+        the app asks each panel for its part (``analyse_panel``).  Default: the parts of
+        ``analyse_panel`` together (``panels_together``)."""
+        return panels_together(self, values)
+
+    def analyse_panel(self, values: dict, panel: str) -> Analysis | Iterator[Analysis] | None:
+        """The part of the analysis one panel shows (``PANELS``), computed only while it is shown:
+
+        * ``SCOPE``: the readouts and notes under the scope, after every slider move: keep it to
+          a few milliseconds (the costly figures belong to the Analysis tab);
+        * ``POLE_MAP``: ``poles`` (the app adds mode names and the root locus);
+        * ``ANALYSIS``: the Analysis tab's readouts, notes and plots (the app adds the margins of
+          ``open_loops``).
+
+        Returns an ``Analysis`` or yields a quick one first.  The app ignores what a panel does not
+        show.  None: the panel shows its part of the Scope's result.  Default (an exercise that does
+        not split its analysis): the whole ``analyse`` for the Scope, None for the other panels."""
+        return self.analyse(values) if panel == SCOPE else None
 
     def simulation(self, values: dict) -> Simulation:
         raise NotImplementedError
@@ -215,6 +278,152 @@ class Exercise:
         """Figures (``matplotlib.figure.Figure``, no pyplot) that back the claims in
         ``python -m app reproduce --html``; helpers in ``exercises/_figures.py``."""
         return []
+
+
+# -- pay once: results remembered per setting of the parameters they read -------------------------
+Result = TypeVar("Result")
+_MISSING = object()                 # a value a computation asked for but the values do not hold
+
+
+class ReadValues(dict):
+    """Parameter values that note the names read from them (``read``): what a computation
+    depends on, found by running it.  Reading every value (iterating, copying, comparing) marks
+    them all."""
+
+    def __init__(self, values: dict):
+        super().__init__(values.raw() if isinstance(values, ReadValues) else values)
+        self.read: set = set()
+
+    def raw(self) -> dict:
+        """The values, without marking them read."""
+        return dict(super().items())
+
+    def _read_all(self) -> None:
+        self.read.update(super().keys())
+
+    def __getitem__(self, name):
+        self.read.add(name)
+        return super().__getitem__(name)
+
+    def get(self, name, default=None):
+        self.read.add(name)
+        return super().get(name, default)
+
+    def __contains__(self, name) -> bool:
+        self.read.add(name)
+        return super().__contains__(name)
+
+    def __iter__(self):
+        self._read_all()
+        return super().__iter__()
+
+    def keys(self):
+        self._read_all()
+        return super().keys()
+
+    def values(self):
+        self._read_all()
+        return super().values()
+
+    def items(self):
+        self._read_all()
+        return super().items()
+
+    def copy(self) -> dict:
+        self._read_all()
+        return self.raw()
+
+    def __eq__(self, other) -> bool:
+        self._read_all()
+        return super().__eq__(other)
+
+    def __ne__(self, other) -> bool:
+        return not self == other
+
+    __hash__ = None
+
+
+class Memo:
+    """Results of a computation on parameter values, each remembered per setting of the values it
+    read (``ReadValues``; a slider it never reads does not make it run again) and of its other
+    arguments (``key``), at most ``size`` of them (the least recently used go first).  A setting
+    whose read values cannot be hashed (an uploaded recording) is not remembered.  Thread-safe;
+    two threads asking for the same new setting at once may both compute it."""
+
+    def __init__(self, size: int = 64):
+        self.size = size
+        self.lock = threading.Lock()
+        self.entries: OrderedDict = OrderedDict()        # (key, names, their values) -> result
+        self.read_sets: dict[Hashable, list[tuple]] = {}  # key -> the name tuples it has read, newest first
+
+    def find(self, key: Hashable, values: dict) -> tuple[object, tuple] | None:
+        """(the result remembered for ``values``, the names it read), or None."""
+        raw = values.raw() if isinstance(values, ReadValues) else values
+        with self.lock:
+            for names in self.read_sets.get(key, ()):
+                setting = _setting(raw, names)
+                entry = self.entries.get((key, names, setting)) if setting is not None else None
+                if entry is not None:
+                    self.entries.move_to_end((key, names, setting))
+                    return entry[0], names
+        return None
+
+    def keep(self, key: Hashable, values: dict, read: set, result) -> None:
+        """Remember ``result``, computed from ``values`` reading ``read``."""
+        raw = values.raw() if isinstance(values, ReadValues) else values
+        names = tuple(sorted(read, key=str))
+        setting = _setting(raw, names)
+        if setting is None:
+            return
+        with self.lock:
+            known = self.read_sets.setdefault(key, [])
+            if names in known:
+                known.remove(names)
+            known.insert(0, names)
+            self.entries[(key, names, setting)] = (result,)
+            self.entries.move_to_end((key, names, setting))
+            while len(self.entries) > self.size:
+                (old_key, old_names, _), _ = self.entries.popitem(last=False)
+                if not any(k == old_key and n == old_names for k, n, _ in self.entries):
+                    self.read_sets[old_key].remove(old_names)
+
+    def call(self, key: Hashable, values: dict, compute: Callable[[dict], Result]) -> Result:
+        """``compute(values)``, or its remembered result for this setting.  When ``values`` are
+        themselves being read for an outer memo, what this computation read is marked there."""
+        found = self.find(key, values)
+        if found is None:
+            tracked = ReadValues(values)
+            result, names = compute(tracked), tracked.read
+            self.keep(key, values, names, result)
+        else:
+            result, names = found
+        if isinstance(values, ReadValues):
+            values.read.update(names)
+        return result
+
+
+def _setting(values: dict, names: tuple) -> tuple | None:
+    """The values of ``names`` (missing ones as a marker), or None if one cannot be hashed."""
+    setting = tuple(values.get(name, _MISSING) for name in names)
+    try:
+        hash(setting)
+    except TypeError:
+        return None
+    return setting
+
+
+def remembered(size: int = 64) -> Callable:
+    """Decorator: ``function(values, *arguments)`` (hashable arguments) computed once per setting of
+    the parameter values it reads and of its arguments (``Memo``)."""
+    def decorate(function: Callable[..., Result]) -> Callable[..., Result]:
+        memo = Memo(size)
+
+        def wrapper(values: dict, *arguments) -> Result:
+            return memo.call(arguments, values, lambda read: function(read, *arguments))
+        wrapper.__doc__, wrapper.__name__, wrapper.__wrapped__ = function.__doc__, function.__name__, function
+        wrapper.memo = memo
+        return wrapper
+    return decorate
 
 
 def claim_run(exercise: Exercise, claim: Claim, overrides: dict | None = None) -> tuple:
