@@ -13,7 +13,7 @@ opened); fuller results take turns with the other tabs' (``app.tab.turns``), so 
 analyses never crowd out its streaming.  Every result is remembered per setting of the
 parameter values it read (``lab_modules.exercises.Memo``), shared by the process's tabs: a
 slider that an analysis never reads does not make it run again, and a class that opens an
-exercise at its defaults computes each panel once.
+exercise at its defaults computes each panel once (``app.panels.panel_analyses``).
 """
 
 from __future__ import annotations
@@ -25,29 +25,16 @@ import traceback
 from collections.abc import Callable, Iterator
 
 from app.panels import margins, mode_picker, pole_map
+from app.panels.panel_analyses import margin_results, panel_results, remembered_margins
 from app.panels.plots import AnalysisPlots
 from app.panels.text import readout_rows, readouts_table
 from app.tab.state import LabState
 from app.tab.turns import Turns
 from app.tab.worker import TabWorker
-from lab_modules.exercises import (
-    ANALYSIS,
-    PANELS,
-    POLE_MAP,
-    SCOPE,
-    Analysis,
-    Exercise,
-    Memo,
-    ReadValues,
-    results,
-)
+from lab_modules.exercises import ANALYSIS, PANELS, POLE_MAP, SCOPE, Analysis, Exercise, results
 
 #: The process's analyses take turns (app/tab/turns.py): one at a time shares the interpreter with streaming.
 ANALYSIS_TURNS = Turns()
-#: The last result of ``Exercise.analyse_panel`` and the margins of ``Exercise.open_loops``, per exercise,
-#: panel and setting of the values they read, for all tabs of the process.
-PANEL_RESULTS = Memo(size=256)
-MARGIN_RESULTS = Memo(size=128)
 WORKSHEET, WORKSHEET_BESIDE = "Worksheet", "Worksheet beside"   # the worksheet's two places (app.panels.docks)
 NOT_YET_SHOWN = "*Computed when this tab is shown …*"
 NO_PLOTS = "This exercise has no analysis plots."
@@ -59,32 +46,6 @@ POLE_MAP_NOTE = ("Poles in the s-plane (discrete poles mapped by s = ln z / T); 
 def analyses(exercise: Exercise, values: dict) -> Iterator[Analysis]:
     """The results of ``exercise.analyse(values)`` (everything), one by one."""
     return results(exercise.analyse(values))
-
-
-def panel_results(exercise: Exercise, values: dict, panel: str) -> Iterator[Analysis] | None:
-    """The results of ``exercise.analyse_panel(values, panel)`` one by one, or None (the panel shows
-    its part of the Scope's result).  A setting remembered in ``PANEL_RESULTS`` gives its last
-    result at once."""
-    key = (exercise.name, panel)
-    found = PANEL_RESULTS.find(key, values)
-    if found is not None:
-        return iter((found[0],))
-    read = ReadValues(values)
-    part = exercise.analyse_panel(read, panel)
-    return None if part is None else _remembered(key, values, read, results(part))
-
-
-def _remembered(key, values: dict, read: ReadValues, found: Iterator[Analysis]) -> Iterator[Analysis]:
-    last = None
-    for last in found:
-        yield last
-    if last is not None:                          # computed to the end (not superseded)
-        PANEL_RESULTS.keep(key, values, read.read, last)
-
-
-def margin_results(exercise: Exercise, values: dict) -> tuple[list, list, list]:
-    """The readouts, plots and notes of the exercise's open loops (``app.panels.margins``)."""
-    return MARGIN_RESULTS.call((exercise.name,), values, lambda read: margins.margin_view(exercise, read))
 
 
 class AnalysisView:
@@ -313,8 +274,7 @@ class AnalysisView:
         found = panel_results(exercise, values, ANALYSIS)
         if found is None:                             # the plots of the Scope's result
             found = (Analysis([], {}, [], result.plots) for result in self._from_scope(serial))
-        remembered = MARGIN_RESULTS.find((exercise.name,), values)
-        loops = remembered[0] if remembered is not None else None
+        loops = remembered_margins(exercise, values)
         for result in found:
             if not self._show_panel(generation, serial, result, loops):
                 return

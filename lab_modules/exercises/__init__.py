@@ -82,22 +82,24 @@ def results(result: Analysis | Iterator[Analysis]) -> Iterator[Analysis]:
 
 
 def panels_together(exercise: Exercise, values: dict) -> Iterator[Analysis]:
-    """The parts of ``exercise.analyse_panel`` as one analysis: the Scope's first result at once, then
-    all of it (readouts and notes: the Scope's, then the Analysis tab's; poles: the Pole map's)."""
+    """The parts of ``exercise.analyse_panel`` as one analysis: each panel's first result together,
+    then each panel's last (readouts and notes: the Scope's, then the Analysis tab's; poles: the
+    Pole map's; a panel without a part of its own takes it from the Scope's result)."""
     if type(exercise).analyse_panel is Exercise.analyse_panel:
         raise NotImplementedError(f"exercise {exercise.name!r} implements neither analyse nor analyse_panel")
-    scope = results(exercise.analyse_panel(values, SCOPE))
-    first = next(scope)
-    yield first
-    scope_last = _last(scope, first)
-    parts = {}
-    for panel in (POLE_MAP, ANALYSIS):
-        part = exercise.analyse_panel(values, panel)
-        parts[panel] = scope_last if part is None else _last(results(part))
-    shown = parts[ANALYSIS] is not scope_last
-    yield Analysis(scope_last.readouts + (parts[ANALYSIS].readouts if shown else []), parts[POLE_MAP].poles,
-                   scope_last.notes + (parts[ANALYSIS].notes if shown else []),
-                   scope_last.plots + (parts[ANALYSIS].plots if shown else []))
+    parts = {panel: exercise.analyse_panel(values, panel) for panel in PANELS}
+    found = {panel: results(part) for panel, part in parts.items() if part is not None}
+    first = {panel: next(found[panel]) for panel in found}
+    yield _together(first)
+    yield _together({panel: _last(found[panel], first[panel]) for panel in found})
+
+
+def _together(parts: dict[str, Analysis]) -> Analysis:
+    """One ``Analysis`` of the panels' ``parts`` (a panel missing from them shows the Scope's part)."""
+    scope = parts[SCOPE]
+    tab = parts.get(ANALYSIS)
+    return Analysis(scope.readouts + (tab.readouts if tab else []), parts.get(POLE_MAP, scope).poles,
+                    scope.notes + (tab.notes if tab else []), scope.plots + (tab.plots if tab else []))
 
 
 def _last(found: Iterator[Analysis], first: Analysis | None = None) -> Analysis:

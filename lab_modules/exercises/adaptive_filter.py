@@ -36,7 +36,7 @@ import scipy.linalg
 from lab_modules import analysis
 from lab_modules.claims import Claim
 from lab_modules.estimators.scheduled_kalman import model_matrices, process_noise
-from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises import POLE_MAP, SCOPE, Analysis, Chart, Exercise, Plot, Series, remembered
 from lab_modules.exercises._stiffness_networks import FBFNN_EPOCHS, FBFNN_RATE, NETWORK_DEFAULTS, networks
 from lab_modules.loops.axial_bearing_loop import (
     COLUMNS,
@@ -203,6 +203,7 @@ def statistics(trace: np.ndarray) -> dict:
     return out
 
 
+@remembered()
 def steady_filter(values: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(A, H, K, P⁻) of the fixed filter in steady state: the a-priori P⁻ from scipy's Riccati solver."""
     physics = setup(values).physics()
@@ -330,7 +331,13 @@ class AdaptiveFilter(Exercise):
                   ("x_M error [V]", "sensor-lag estimate error")]
         return {"filter error (centre model)": (A - A @ K @ H, states, T)}
 
-    def analyse(self, values: dict):
+    def analyse_panel(self, values: dict, panel: str) -> Analysis:
+        """The Scope: the fixed filter's steady σ_x (Riccati); the Pole map: its error poles; the
+        Analysis tab: the two-point scenario run (Figs. 15-16) with each filter's bias and RMS error."""
+        if panel == SCOPE:
+            return Analysis([("Filter's own σ_x (steady, centre model)", steady_sigma_um(values), "µm")], {}, [])
+        if panel == POLE_MAP:
+            return Analysis([], filter_poles(values), [])
         trace, status = run(values)
         stats = statistics(trace)
         readouts = []
@@ -340,12 +347,11 @@ class AdaptiveFilter(Exercise):
                          (f"F̂_St bias, {LABELS[f]}, point 2", bias[1], "N")]
         for f in FILTERS:
             readouts.append((f"x̂ RMS error, {LABELS[f]}", stats[f]["position_rms_both_um"], "µm"))
-        readouts += [("x̂ RMS ratio scheduled / fixed",
-                      stats["fbfnn"]["position_rms_both_um"] / stats["fixed"]["position_rms_both_um"], ""),
-                     ("Filter's own σ_x (steady, centre model)", steady_sigma_um(values), "µm")]
+        readouts.append(("x̂ RMS ratio scheduled / fixed",
+                         stats["fbfnn"]["position_rms_both_um"] / stats["fixed"]["position_rms_both_um"], ""))
         notes = [f"Run: {status or 'ok'}",
                  "Statistics over the last 100 ms of each operating point (200-300 ms and 500-600 ms)."]
-        return Analysis(readouts, filter_poles(values), notes, plots(trace))
+        return Analysis(readouts, {}, notes, plots(trace))
 
     def simulation(self, values: dict) -> AdaptiveFilterSimulation:
         return AdaptiveFilterSimulation(values)

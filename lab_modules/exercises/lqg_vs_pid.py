@@ -43,7 +43,7 @@ import numpy as np
 
 from lab_modules.claims import Claim
 from lab_modules.controllers.lqr import PAPER_LQG, PAPER_LQR_WEIGHTS, gain_deviation, integral_augmented_model
-from lab_modules.exercises import Analysis, Chart, Exercise, Series
+from lab_modules.exercises import POLE_MAP, SCOPE, Analysis, Chart, Exercise, Series, remembered
 from lab_modules.exercises._common import (
     AXIS_STATES,
     INTEGRAL_STATE,
@@ -239,6 +239,13 @@ CLAIMS = (
 
 # -- the exercise --------------------------------------------------------------------
 
+@remembered()
+def step_and_loop_figures(values: dict) -> tuple[dict, dict]:
+    """Both loops' step tests (``step_tests_at``) and linear figures (``loop_figures``)."""
+    loops = setups(values)
+    return step_tests_at(values, loops), {name: loop_figures(axis) for name, axis in loops.items()}
+
+
 class LqgVsPid(Exercise):
     name = "lqg_vs_pid"
     title = "LQG regulator against the optimal PID"
@@ -301,14 +308,24 @@ class LqgVsPid(Exercise):
     def open_loops(self, values: dict) -> dict:
         return {name: axis.loop_at_plant_input() for name, axis in setups(values).items()}
 
-    def analyse(self, values: dict):
-        """Yields the step tests, the two stiffness definitions and the poles
-        first; then the noise-driven RMS values and the largest disturbance step
-        a loop survives where the step test lost it; then the trade-off fronts
-        (a sweep of about 150 designs, cached per filter and noise setting)."""
+    def analyse_panel(self, values: dict, panel: str):
+        """The Scope: the step tests of both loops (noise-free runs), their two stiffness figures and
+        the LQG's poles and gains; the Pole map: the poles; the Analysis tab: the step plots first,
+        then the noise-driven RMS values and the largest disturbance step a loop survives where the
+        step test lost it, then the trade-off fronts (a sweep of about 150 designs, cached per filter
+        and noise setting)."""
+        if panel == SCOPE:
+            return self._step_readouts(values)
+        if panel == POLE_MAP:
+            loops = setups(values)
+            return Analysis([], pole_sets(loops, regulator(values)), [])
+        return self._analysis_tab(values)
+
+    @staticmethod
+    def _step_readouts(values: dict) -> Analysis:
         loops, lqg = setups(values), regulator(values)
-        tests, poles = step_tests_at(values, loops), pole_sets(loops, lqg)
-        linear = {name: loop_figures(axis) for name, axis in loops.items()}
+        tests, linear = step_and_loop_figures(values)
+        poles = pole_sets(loops, lqg)
         readouts = []
         for name in LOOPS:
             # a figure the step test could not measure is a word: the rotor touched down (or never settled)
@@ -348,24 +365,31 @@ class LqgVsPid(Exercise):
              "|Δf| / largest deflection after a force step (Fig. 9); minimum dynamic stiffness = the "
              "smallest |F/X| over frequency (a sinusoidal force at the worst frequency, ISO 14839 style)."),
         ]
+        return Analysis(readouts, {}, notes)
+
+    @staticmethod
+    def _analysis_tab(values: dict):
+        loops = setups(values)
+        tests, linear = step_and_loop_figures(values)
         plots = step_plots(tests, values)
         pending_plots = plots + front_plots(values, None)
         pending = [("Noise-driven RMS displacement", "computing …", ""),
                    ("Trade-off fronts", "computing …", "")]
-        yield Analysis(readouts + pending, poles, notes, pending_plots)
-        readouts += [(f"{name}: noise-driven RMS displacement", linear[name]["noise_rms_x_m"] * 1e6, "µm")
-                     for name in LOOPS]
+        yield Analysis(pending, {}, [], pending_plots)
+        readouts = [(f"{name}: noise-driven RMS displacement", linear[name]["noise_rms_x_m"] * 1e6, "µm")
+                    for name in LOOPS]
         readouts += [(f"{name}: noise-driven RMS coil current", linear[name]["noise_rms_current_a"], "A")
                      for name in LOOPS]
+        notes = []
         for name in LOOPS:
             if tests[name]["stops"]:
                 largest = largest_disturbance_step(loops[name])
                 readouts.append((f"{name}: largest disturbance step held (chosen plant)", largest, "N"))
                 notes.append(f"The {name} loop loses the rotor on the {values['disturbance_step_n']:g} N step; "
                              f"it holds at most {largest:.0f} N on this plant (150 ms, no noise).")
-        yield Analysis(readouts + pending[1:], poles, notes, pending_plots)
+        yield Analysis(readouts + pending[1:], {}, notes, pending_plots)
         lqg_front(values)                       # one family, then a chance to give way to newer settings
-        yield Analysis(readouts + pending[1:], poles, notes, pending_plots)
+        yield Analysis(readouts + pending[1:], {}, notes, pending_plots)
         front = front_figures(values, linear["PID"]["noise_rms_current_a"])
         target = FRONT_STIFFNESS_TARGET_N_PER_M * 1e-6
         readouts += [
@@ -377,7 +401,7 @@ class LqgVsPid(Exercise):
             (f"Fronts: least peak current for {target:g} N/µm, PID", front["peak_current_for_target_pid_a"], "A"),
             (f"Fronts: least peak current for {target:g} N/µm, I-PD", front["peak_current_for_target_ipd_a"], "A"),
         ]
-        yield Analysis(readouts, poles, notes, plots + front_plots(values, linear))
+        yield Analysis(readouts, {}, notes, plots + front_plots(values, linear))
 
     def simulation(self, values: dict) -> SideBySide:
         return side_by_side(values)

@@ -73,6 +73,7 @@ DISTURBANCE_FORCE_N = 0.5                                # unmodelled force per 
 AMPLIFIER_NOISE_A = 1e-3
 GAIN_STEP = 0.05
 GAIN_SEARCH = np.round(np.arange(GAIN_STEP, 4.0 + 1e-9, GAIN_STEP), 2)   # gain factors tried, bottom up
+EDGE_STEP = 1e-4                  # the mode that goes unstable first: the most unstable this far above the edge
 PATH_OFFSETS_MM = np.linspace(*OFFSET_RANGE_MM, 43)
 
 P = Parameter
@@ -266,8 +267,11 @@ def largest_stable_gain(values: dict, sensor_offset_mm: float | None = None) -> 
     the mode that goes unstable just above it (1-based; None if the loop is still
     stable at the top of the range).
 
-    Scans ``GAIN_SEARCH`` bottom up, then bisects the edge to 0.005.  With no
-    stable gain at all it returns 0.0 and the mode most unstable at the set gains.
+    The closed loop's state matrix is affine in the factor (it scales the PID's output), so
+    the loops at both ends of ``GAIN_SEARCH`` give every factor's poles: the first stable
+    factor of ``GAIN_SEARCH``, then the stability edge above it (``analysis.first_instability``:
+    the bracketing grid step, then Brent's method on the spectral radius).  With no stable
+    gain at all it returns 0.0 and the mode most unstable at the set gains.
     """
     key = (tuple(sorted((k, v) for k, v in values.items() if k not in ("shown_mode", "seed", "time_scale"))),
            sensor_offset_mm)
@@ -277,25 +281,21 @@ def largest_stable_gain(values: dict, sensor_offset_mm: float | None = None) -> 
 @lru_cache(maxsize=256)
 def _largest_stable_gain(key) -> tuple[float, int | None]:
     values, offset = dict(key[0]), key[1]
-
-    def is_stable(g: float) -> bool:
-        return stable(loop(values, g, offset))
+    low, high = float(GAIN_SEARCH[0]), float(GAIN_SEARCH[-1])
+    A_low, A_high = (np.asarray(loop(values, g, offset).A) for g in (low, high))
 
     def most_unstable_mode(g: float) -> int:
         return int(np.argmax(mode_poles(loop(values, g, offset), int(values["modes"])).real)) + 1
 
-    stable_gains = iter(g for g in GAIN_SEARCH if is_stable(g))
-    low = next(stable_gains, None)
-    if low is None:
+    stable = np.flatnonzero(analysis.stability_margins(A_low, A_high, low, high, GAIN_SEARCH) < 0.0)
+    if stable.size == 0:
         return 0.0, most_unstable_mode(values["gain_factor"])
-    high = next((g for g in GAIN_SEARCH if g > low and not is_stable(g)), None)
-    if high is None:
-        return float(GAIN_SEARCH[-1]), None
-    low = high - GAIN_STEP
-    while high - low > 0.005:
-        mid = 0.5 * (low + high)
-        low, high = (mid, high) if is_stable(mid) else (low, mid)
-    return float(low), most_unstable_mode(high)
+    start = float(GAIN_SEARCH[stable[0]])
+    A_start = A_low + (start - low) / (high - low) * (A_high - A_low)
+    edge = analysis.first_instability(A_start, A_high, start, high, factors=GAIN_SEARCH[stable[0]:])
+    if edge >= high:
+        return high, None
+    return edge, most_unstable_mode(edge * (1.0 + EDGE_STEP))
 
 
 def residue_signs(values: dict, sensor_offset_mm: float | None = None) -> np.ndarray:

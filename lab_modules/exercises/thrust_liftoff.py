@@ -36,7 +36,7 @@ import numpy as np
 from lab_modules import analysis
 from lab_modules.claims import Claim
 from lab_modules.estimators.thrust_kalman import PAPER_Q_N2, H
-from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises import POLE_MAP, SCOPE, Analysis, Chart, Exercise, Plot, Series
 from lab_modules.exercises._common import pairs
 from lab_modules.loops.thrust_liftoff_loop import (
     ThrustSetup,
@@ -270,18 +270,37 @@ class ThrustLiftoff(Exercise):
         """The lift-off loop on the linear plant (eq. 5), broken at the current command."""
         return {f"PID, {values['feedback']} x": loop_at_plant_input(setup(values))}
 
-    def analyse(self, values: dict) -> Analysis:
-        """Linear figures (poles, Lyapunov noise), the filter's gain history and the noise-free lift-offs."""
+    def analyse_panel(self, values: dict, panel: str) -> Analysis:
+        """The Scope: the linear figures (Lyapunov noise, Riccati gains, discretisation); the Pole map:
+        the loops' and the filter's poles; the Analysis tab: the noise-free lift-offs, the filter's
+        gain history and the current noise over the sensor's."""
+        if panel == SCOPE:
+            return self._linear_figures(values)
+        if panel == POLE_MAP:
+            return Analysis([], self._poles(values), [])
+        s = setup(values)
+        runs = {src: liftoff(values, src) for src in SOURCES}
+        figures = {src: liftoff_figures(runs[src][0], s.start_position_m) for src in SOURCES}
+        lifted = [
+            ("Noise-free overshoot, raw PID", figures["measured"]["overshoot_percent"], "%"),
+            ("Noise-free overshoot, filter-PID", figures["estimated"]["overshoot_percent"], "%"),
+            ("Noise-free peak time", figures["measured"]["peak_time_s"] * 1e3, "ms"),
+            ("Noise-free 2 % settling time", figures["measured"]["settling_time_s"], "s"),
+        ]
+        plots = [self._liftoff_plot(runs), self._gain_plot(s.design), self._current_noise_plot(s)]
+        return Analysis(lifted, {}, [], plots)
+
+    @staticmethod
+    def _linear_figures(values: dict) -> Analysis:
+        """Readouts and notes of the linear analysis (poles, Lyapunov noise, the filter's steady state)."""
         s = setup(values)
         b = s.bearing
-        design = s.design
-        gain, _, P_corr = design.steady_state
-        loops = {src: linear_loop(replace(s, use_estimate=src == "estimated")) for src in SOURCES}
-        std = {src: loops[src].output_std(s.sensor_noise_m, s.force_noise_n) for src in SOURCES}
-        filter_z = design.error_poles()
-        radius, damping = pole_damping(filter_z)
+        gain, _, P_corr = s.design.steady_state
+        std = {src: linear_loop(replace(s, use_estimate=src == "estimated")).output_std(s.sensor_noise_m,
+                                                                                         s.force_noise_n)
+               for src in SOURCES}
+        radius, damping = pole_damping(s.design.error_poles())
         regulator = linear_loop(replace(s, use_estimate=False), with_filter=False)
-        no_g = linear_loop(replace(s, use_estimate=False), current_loop=False, with_filter=False)
         Phi, B_d, _ = b.taylor_discretisation()
         Phi_e, B_e, _ = b.exact_discretisation()
         net = (b.current_stiffness_n_per_a * s.proportional_a_per_m - b.negative_stiffness_n_per_m) * 1e-6
@@ -319,21 +338,19 @@ class ThrustLiftoff(Exercise):
         note = instability_note(s)
         if note:
             notes.insert(0, note)
-        poles = {"open-loop plant": np.array([b.open_loop_pole_rad_per_s, -b.open_loop_pole_rad_per_s],
-                                             dtype=complex),
-                 "closed loop with G(s)": to_s(regulator.poles()),
-                 "closed loop without G(s)": to_s(no_g.poles()),
-                 "filter error": analysis.z_to_s(filter_z, T)}
-        runs = {src: liftoff(values, src) for src in SOURCES}
-        figures = {src: liftoff_figures(runs[src][0], s.start_position_m) for src in SOURCES}
-        lifted = [
-            ("Noise-free overshoot, raw PID", figures["measured"]["overshoot_percent"], "%"),
-            ("Noise-free overshoot, filter-PID", figures["estimated"]["overshoot_percent"], "%"),
-            ("Noise-free peak time", figures["measured"]["peak_time_s"] * 1e3, "ms"),
-            ("Noise-free 2 % settling time", figures["measured"]["settling_time_s"], "s"),
-        ]
-        plots = [self._liftoff_plot(runs), self._gain_plot(design), self._current_noise_plot(s)]
-        return Analysis(readouts[:6] + lifted + readouts[6:], poles, notes, plots)
+        return Analysis(readouts, {}, notes)
+
+    @staticmethod
+    def _poles(values: dict) -> dict[str, np.ndarray]:
+        s = setup(values)
+        b = s.bearing
+        regulator = linear_loop(replace(s, use_estimate=False), with_filter=False)
+        no_g = linear_loop(replace(s, use_estimate=False), current_loop=False, with_filter=False)
+        return {"open-loop plant": np.array([b.open_loop_pole_rad_per_s, -b.open_loop_pole_rad_per_s],
+                                            dtype=complex),
+                "closed loop with G(s)": to_s(regulator.poles()),
+                "closed loop without G(s)": to_s(no_g.poles()),
+                "filter error": analysis.z_to_s(s.design.error_poles(), T)}
 
     @staticmethod
     def _liftoff_plot(runs: dict) -> Plot:

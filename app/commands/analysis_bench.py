@@ -1,0 +1,134 @@
+"""``python -m app bench --analysis``: the CPU a tab's analyses cost, per exercise.
+
+Measured the way a tab computes them (``app.panels.panel_analyses``, the pole map's and the
+Analysis tab's views included), each exercise in a fresh process whose simulation kernels are
+compiled (as in a running lab) but whose analyses are not yet remembered:
+
+* first open: the Scope's results at the defaults, what a tab computes when it opens an exercise;
+* slider move (Scope shown): the Scope's results after a move of the exercise's first numeric
+  control (median of three moves: 5, 10 and 15 % up, or one step for an integer);
+* opening the Pole map or the Analysis tab after such a move: that panel's results at the new
+  values (its view built too: mode names, root locus, margins, chart data).
+
+Thread CPU time, so the figures hold on a shared machine (the wall time is not measured).
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import json
+import multiprocessing
+import statistics
+import time
+
+from app.panels import plots, pole_map
+from app.panels.panel_analyses import margin_results, panel_results
+from app.panels.text import readouts_table
+from lab_modules.exercises import ANALYSIS, POLE_MAP, SCOPE, Analysis, Exercise, get, registry
+from lab_modules.parameters import Parameter, ParameterError
+
+MOVES = 3
+SKIPPED = ("seed", "time_scale")                  # controls that change no analysis
+
+
+def moved(parameter: Parameter, k: int) -> float:
+    """The ``k``-th move of a numeric control from its default (5 % more per move, one step for an
+    integer, a share of the range from 0), inside its range."""
+    if parameter.integer:
+        up = parameter.default + 1
+        return up if up <= parameter.maximum else parameter.default - 1
+    default = float(parameter.default)
+    span = parameter.maximum - parameter.minimum
+    value = default * (1 + 0.05 * (k + 1)) if default else parameter.minimum + 0.01 * (k + 1) * span
+    return min(max(value, parameter.minimum), parameter.maximum)
+
+
+def slider(exercise: Exercise, values: dict) -> Parameter:
+    """The exercise's first numeric control whose moves it accepts."""
+    for parameter in exercise.parameters:
+        if parameter.choices or parameter.name in SKIPPED:
+            continue
+        try:
+            exercise.resolve({**{k: v for k, v in values.items() if k != "data"}, parameter.name: moved(parameter, 0)})
+        except ParameterError:
+            continue
+        return parameter
+    raise ParameterError(f"exercise {exercise.name!r} has no numeric control to move")
+
+
+def scope_job(exercise: Exercise, values: dict) -> Analysis:
+    """The Scope's results and its readouts table; the last result."""
+    last = None
+    for last in panel_results(exercise, values, SCOPE):
+        readouts_table(last.readouts, last.notes)
+    return last
+
+
+def pole_job(exercise: Exercise, values: dict, scope: Analysis) -> None:
+    """The Pole map's results, their view (mode names, root locus) and the charts' data."""
+    for result in panel_results(exercise, values, POLE_MAP) or (scope,):
+        view = pole_map.view(exercise, values, result.poles)
+        pole_map.charts(view)
+        pole_map.table_markdown(view)
+
+
+def analysis_job(exercise: Exercise, values: dict, scope: Analysis) -> None:
+    """The Analysis tab's results, the margins and every chart's data."""
+    found = panel_results(exercise, values, ANALYSIS) or (Analysis([], {}, [], scope.plots),)
+    readouts, margin_plots, notes = margin_results(exercise, values)
+    for result in found:
+        readouts_table(result.readouts + readouts, result.notes + notes)
+        for plot in result.plots + margin_plots:
+            plots.plot_chart(plot)
+
+
+def cpu_ms(job) -> tuple[float, object]:
+    start = time.thread_time()
+    result = job()
+    return 1e3 * (time.thread_time() - start), result
+
+
+def measure(name: str) -> dict:
+    """The figures of one exercise (run in a process of its own)."""
+    exercise = get(name)
+    values = exercise.resolve({})
+    exercise.simulation(values).advance(10)       # compiled kernels, as in a running lab
+    first_open, scope = cpu_ms(lambda: scope_job(exercise, dict(values)))
+    parameter = slider(exercise, values)
+    costs: dict[str, list[float]] = {"move": [], POLE_MAP: [], ANALYSIS: []}
+    for k in range(MOVES):
+        at = {**values, parameter.name: moved(parameter, k)}
+        spent, scope = cpu_ms(lambda at=at: scope_job(exercise, at))
+        costs["move"].append(spent)
+        costs[POLE_MAP].append(cpu_ms(lambda at=at, scope=scope: pole_job(exercise, at, scope))[0])
+        costs[ANALYSIS].append(cpu_ms(lambda at=at, scope=scope: analysis_job(exercise, at, scope))[0])
+    return {"exercise": name, "slider": parameter.name, "move_ms": round(statistics.median(costs["move"]), 1),
+            "open_pole_map_ms": round(statistics.median(costs[POLE_MAP]), 1),
+            "open_analysis_ms": round(statistics.median(costs[ANALYSIS]), 1), "first_open_ms": round(first_open, 1)}
+
+
+def run(names: list[str]) -> list[dict]:
+    """Each exercise in a fresh process, one after the other."""
+    rows = []
+    context = multiprocessing.get_context("spawn")
+    for name in names:
+        with concurrent.futures.ProcessPoolExecutor(max_workers=1, mp_context=context) as pool:
+            rows.append(pool.submit(measure, name).result())
+    return rows
+
+
+def main(as_json: bool = False, only: list[str] | None = None) -> int:
+    names = [get(name).name for name in only] if only else list(registry())
+    if not as_json:
+        print(f"{'exercise':18s} {'slider moved':28s} {'move':>8s} {'open Pole map':>14s} "
+              f"{'open Analysis':>14s} {'first open':>11s}   (CPU ms; move: Scope shown)", flush=True)
+    rows = []
+    for name in names:
+        row, = run([name])
+        rows.append(row)
+        if not as_json:
+            print(f"{name:18s} {row['slider']:28s} {row['move_ms']:8.1f} {row['open_pole_map_ms']:14.1f} "
+                  f"{row['open_analysis_ms']:14.1f} {row['first_open_ms']:11.1f}", flush=True)
+    if as_json:
+        print(json.dumps(rows, indent=2))
+    return 0
