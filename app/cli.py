@@ -165,7 +165,7 @@ def main(argv: list[str] | None = None) -> int:
             from app.commands.load_bench import main as load_bench_main
             return load_bench_main(args.clients, args.workers, args.steps, args.window, args.exercise,
                                    args.bench_port, args.breakdown, args.json, args.all_steps,
-                                   args.slider_every)
+                                   args.slider_every, args.mix)
         if args.command == "bench":
             from app.commands.bench import main as bench_main
             return bench_main(args.seconds, args.json)

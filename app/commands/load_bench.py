@@ -12,7 +12,11 @@ gets ``MIN_UPDATES_PER_S`` scope updates per second is the capacity.  The run
 stops at the first step that fails, so it is bounded in time.
 
 ``--breakdown`` also attributes the received bytes to message kinds (scope
-chart data, readouts, 3D view, ...).
+chart data, readouts, 3D view, ...).  ``--mix`` spreads the tabs over every
+exercise (each switches to its own after the lab opens) and over the panel tabs
+(``PANEL_MIX``: half on the Scope, the others on the Pole map or the Analysis tab,
+reported as the browser's beacon does); each moves a control its exercise's
+readouts depend on (``mix_plan``).
 """
 
 from __future__ import annotations
@@ -36,11 +40,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import msgspec
+import numpy as np
 import viser
 import websockets.asyncio.client
 import zstandard
 
-from lab_modules.exercises import get
+from app.infra.viser_internals import SHOWN_LABEL
+from app.panels.text import cell
+from lab_modules.exercises import SCOPE, ReadValues, get, registry, results
 
 ROOT = Path(__file__).resolve().parents[2]
 PROTOCOL = f"viser-v{viser.__version__}"      # the subprotocol a viser client of this version offers
@@ -57,6 +64,8 @@ WORKER_HEADER = "X-Lab-Worker"                # set by the generated HAProxy con
 #: An analysis readout of kalman_noise that a move of the position-noise slider changes: the time from a
 #: move to its new value in the tab is the slider-to-readout latency (the scope-window rows change anyway)
 READOUT_ROW = re.compile(r"RMS displacement, measured feedback \| *([^|]+?) *\|")
+#: With ``--mix``, the panel tab the k-th tab shows (its exercise: the k-th of the lab's, in turn)
+PANEL_MIX = ("Scope", "Pole map", "Scope", "Analysis")
 
 
 def scope_titles(exercise_name: str) -> tuple[str, ...]:
@@ -86,14 +95,67 @@ def _binary_bytes(value, lengths: list[int]) -> int:
     return 0
 
 
+@dataclass(frozen=True)
+class Plan:
+    """What a tab does with its exercise: the scope chart titles, the slider it moves between two
+    values, and the readout row (``| label | value |``) whose change answers a move."""
+
+    exercise: str
+    titles: tuple[str, ...]
+    slider_label: str = SLIDER_LABEL
+    slider_values: tuple[float, float] = SLIDER_VALUES
+    readout_row: re.Pattern = READOUT_ROW
+
+
+MIX_RUN_S = 0.3                 # simulated seconds a mix tab's moved setting must run without stopping
+
+
+def mix_plan(exercise_name: str) -> Plan:
+    """The first plain numeric slider the exercise's Scope readouts read with two values 10 % (or 2 %
+    of its range) apart, from its default or else from the middle of its range, at which the
+    simulation keeps running (a stopped run sends no scope updates) and a readout differs; that
+    readout answers a move."""
+    exercise = get(exercise_name)
+    values = exercise.resolve({})
+
+    def scope_readouts(at: dict) -> tuple[list, set]:
+        read = ReadValues(at)
+        *_, last = results(exercise.analyse_panel(read, SCOPE))
+        return last.readouts, read.read
+
+    def runs(at: dict) -> bool:
+        simulation = exercise.simulation(at)
+        simulation.advance(round(MIX_RUN_S / simulation.sample_time_s))
+        return not simulation.status_message()
+    _, read = scope_readouts(values)
+    for parameter in exercise.parameters:
+        if parameter.choices or parameter.log or parameter.integer or parameter.name not in read:
+            continue
+        low, high = exercise.parameter_ranges(values).get(parameter.name, (parameter.minimum, parameter.maximum))
+        for start in (float(parameter.default), 0.5 * (low + high)):
+            moved = float(f"{min(max(1.1 * start if start else low + 0.02 * (high - low), low), high):.4g}")
+            pair = [{**values, parameter.name: value} for value in (start, moved)]
+            if not all(runs(at) for at in pair):
+                continue
+            (before, _), (after, _) = (scope_readouts(at) for at in pair)
+            changed = next((label for (label, a, _), (_, b, _) in zip(before, after) if a != b), None)
+            if changed is not None:
+                label = f"{parameter.label} [{parameter.unit}]" if parameter.unit else parameter.label
+                return Plan(exercise_name, scope_titles(exercise_name), label, (start, moved),
+                            re.compile(re.escape(cell(changed)) + r" \| *([^|]+?) *\|"))
+    return Plan(exercise_name, scope_titles(exercise_name), "", SLIDER_VALUES, re.compile(r"(?!)"))
+
+
 @dataclass
 class Tab:
     """One headless tab: a websocket client that receives and decodes what the lab sends."""
 
     url: str
-    titles: tuple[str, ...]                   # scope chart titles
+    plan: Plan
     breakdown: bool = False
     slider_every: int = SLIDER_EVERY           # 0: the tab never moves a slider
+    switch_to: str | None = None              # the title of the exercise to choose once the lab opens
+    panel: str = SCOPE                        # the panel tab it shows
     received_bytes: int = 0
     scope_times: list[float] = field(default_factory=list)   # arrival of each update of the first scope chart
     kind_bytes: Counter = field(default_factory=Counter)
@@ -117,13 +179,19 @@ class Tab:
             props = message["props"]
             label = props.get("label") or props.get("title") or ""
             if kind == "GuiUplotMessage":
-                self.kinds[message["uuid"]] = "scope chart" if label in self.titles else "static chart"
-                if label == self.titles[0]:
+                self.kinds[message["uuid"]] = "scope chart" if label in self.plan.titles else "static chart"
+                if label == self.plan.titles[0]:
                     self.scope_uuid = message["uuid"]
             elif kind == "GuiMarkdownMessage":
                 self.kinds[message["uuid"]] = "markdown (readouts, status, tables)"
-            elif kind == "GuiSliderMessage" and label.startswith(SLIDER_LABEL):
+            elif kind == "GuiSliderMessage" and self.plan.slider_label and label.startswith(self.plan.slider_label):
                 self.slider = message["uuid"]
+            elif kind == "GuiDropdownMessage" and label == "Exercise" and self.switch_to is not None:
+                self.answers.append({"type": "GuiUpdateMessage", "uuid": message["uuid"],
+                                     "updates": {"value": self.switch_to}})
+                self.switch_to = None
+            elif kind == "GuiButtonMessage" and label == f"{SHOWN_LABEL} {self.panel}":   # as the browser's beacon
+                self.answers.append({"type": "GuiUpdateMessage", "uuid": message["uuid"], "updates": {"value": True}})
             return "GUI set-up"
         if kind.startswith("Scene") or kind.endswith("SceneNodeMessage") or "Mesh" in kind or "Label" in kind:
             return "3D view"
@@ -152,7 +220,7 @@ class Tab:
 
     def _read_readout(self, message: dict, now: float) -> None:
         content = (message.get("updates") or message.get("props") or {}).get("_markdown")   # viser's name
-        found = READOUT_ROW.search(content) if isinstance(content, str) else None
+        found = self.plan.readout_row.search(content) if isinstance(content, str) else None
         if found is None or found.group(1) == self.readout:
             return
         if self.moved_at is not None and self.readout is not None:
@@ -178,7 +246,7 @@ class Tab:
             await connection.send(msgspec.msgpack.encode(camera))
             if self.slider is not None and self.slider_every and turn % self.slider_every == self.slider_every - 1:
                 move = {"type": "GuiUpdateMessage", "uuid": self.slider,
-                        "updates": {"value": SLIDER_VALUES[turn // self.slider_every % 2]}}
+                        "updates": {"value": self.plan.slider_values[turn // self.slider_every % 2]}}
                 await connection.send(msgspec.msgpack.encode(move))
                 self.moved_at = time.perf_counter()
             turn += 1
@@ -324,12 +392,15 @@ class Step:
                 "slider_moves_answered": len(self.readout_latencies_s),
                 "readout_latency_s_median": _rounded(statistics.median(self.readout_latencies_s)
                                                      if self.readout_latencies_s else None),
+                "readout_latency_s_p95": _rounded(float(np.percentile(self.readout_latencies_s, 95))
+                                                  if self.readout_latencies_s else None),
                 "readout_latency_s_max": _rounded(max(self.readout_latencies_s, default=None)),
                 "connected": self.connected, "ok": self.ok}
 
 
-async def _measure(url: str, steps: list[int], window_s: float, server_pid: int, titles: tuple[str, ...],
-                   breakdown: bool, report, all_steps: bool, slider_every: int) -> tuple[list[Step], list[Tab]]:
+async def _measure(url: str, steps: list[int], window_s: float, server_pid: int, new_tab,
+                   report, all_steps: bool) -> tuple[list[Step], list[Tab]]:
+    """``new_tab(url, k)``: the k-th tab."""
     stop = asyncio.Event()
     tabs: list[Tab] = []
     tasks: list[asyncio.Task] = []
@@ -337,7 +408,7 @@ async def _measure(url: str, steps: list[int], window_s: float, server_pid: int,
     try:
         for clients in steps:
             while len(tabs) < clients:
-                tab = Tab(url, titles, breakdown, slider_every)
+                tab = new_tab(url, len(tabs))
                 tabs.append(tab)
                 tasks.append(asyncio.create_task(tab.run(stop)))
                 await asyncio.sleep(1.0 / CONNECT_RATE_PER_S)
@@ -391,10 +462,26 @@ def ramp(clients: int, steps: int) -> list[int]:
     return sorted({max(1, round(clients * (k + 1) / steps)) for k in range(steps)})
 
 
+def tab_factory(exercise: str, breakdown: bool, slider_every: int, mix: bool):
+    """The tabs' maker: each on ``exercise`` with the Scope shown, or with ``mix`` the k-th on the
+    k-th exercise (``registry`` order, in turn) and on ``PANEL_MIX[k]``."""
+    if not mix:
+        plan = Plan(exercise, scope_titles(exercise))
+        return lambda url, k: Tab(url, plan, breakdown, slider_every)
+    names = list(registry())
+    plans = {name: mix_plan(name) for name in names}
+
+    def new_tab(url: str, k: int) -> Tab:
+        name = names[k % len(names)]
+        return Tab(url, plans[name], breakdown, slider_every, None if name == exercise else get(name).title,
+                   PANEL_MIX[k % len(PANEL_MIX)])
+    return new_tab
+
+
 def run(clients: int, workers: int, steps: int, window_s: float, exercise: str, port: int,
         breakdown: bool, report=lambda step: None, all_steps: bool = False,
-        slider_every: int = SLIDER_EVERY) -> dict:
-    titles = scope_titles(exercise)
+        slider_every: int = SLIDER_EVERY, mix: bool = False) -> dict:
+    new_tab = tab_factory(exercise, breakdown, slider_every, mix)
     with tempfile.TemporaryDirectory() as scratch:
         log = Path(scratch) / "server.log"
         extra: tuple[str, ...] = ()
@@ -402,10 +489,9 @@ def run(clients: int, workers: int, steps: int, window_s: float, exercise: str, 
             extra = ("--worker-ports", str(port + 1))
         with lab_server(port, workers, exercise, log, extra) as server:
             results, tabs = asyncio.run(_measure(f"ws://127.0.0.1:{port}", ramp(clients, steps), window_s,
-                                                 server.pid, titles, breakdown, report, all_steps,
-                                                 slider_every))
+                                                 server.pid, new_tab, report, all_steps))
     passing = [s.clients for s in results if s.ok]
-    result = {"exercise": exercise, "workers": workers, "window_s": window_s,
+    result = {"exercise": "mix" if mix else exercise, "workers": workers, "window_s": window_s,
               "camera_period_s": CAMERA_PERIOD_S, "slider_move_period_s": CAMERA_PERIOD_S * slider_every or None,
               "machine_cores": os.cpu_count(), "load_average_1min": os.getloadavg()[0],
               "steps": [s.row() for s in results],
@@ -424,7 +510,8 @@ def run(clients: int, workers: int, steps: int, window_s: float, exercise: str, 
 
 
 def main(clients: int, workers: int, steps: int, window_s: float, exercise: str, port: int,
-         breakdown: bool, as_json: bool, all_steps: bool = False, slider_every: int = SLIDER_EVERY) -> int:
+         breakdown: bool, as_json: bool, all_steps: bool = False, slider_every: int = SLIDER_EVERY,
+         mix: bool = False) -> int:
     def report(step: Step) -> None:
         if not as_json:
             r = step.row()
@@ -434,16 +521,18 @@ def main(clients: int, workers: int, steps: int, window_s: float, exercise: str,
                   f"per tab ({r['server_cpu_ms_per_update']:.2f} ms per update = "
                   f"{r['server_core_percent_per_tab_at_25_per_s']:.2f} % at 25/s); bench clients {r['bench_client_cores']:.2f} cores"
                   + (f"; slider move to readout: median {r['readout_latency_s_median']:.2f} s, "
-                     f"max {r['readout_latency_s_max']:.2f} s ({r['slider_moves_answered']} moves)"
+                     f"p95 {r['readout_latency_s_p95']:.2f} s, max {r['readout_latency_s_max']:.2f} s "
+                     f"({r['slider_moves_answered']} moves)"
                      if r["slider_moves_answered"] else "")
                   + ("" if step.ok else "  <- below target"), flush=True)
 
     if not as_json:
         moves = f"a slider move every ~{CAMERA_PERIOD_S * slider_every:.0f} s" if slider_every else "no slider moves"
-        print(f"{exercise}: {workers} worker(s), up to {clients} headless tabs ({moves}) "
-              f"(load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores at start)", flush=True)
+        print(f"{'every exercise and panel (--mix)' if mix else exercise}: {workers} worker(s), "
+              f"up to {clients} headless tabs ({moves}) (load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores at start)", flush=True)
     try:
-        result = run(clients, workers, steps, window_s, exercise, port, breakdown, report, all_steps, slider_every)
+        result = run(clients, workers, steps, window_s, exercise, port, breakdown, report, all_steps, slider_every,
+                     mix)
     except RuntimeError as error:
         print(f"error: {error}", file=sys.stderr)
         return 1
