@@ -44,7 +44,7 @@ import scipy.signal
 
 from lab_modules import analysis
 from lab_modules.claims import Claim
-from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises import ANALYSIS, POLE_MAP, Analysis, Chart, Exercise, Plot, Series
 from lab_modules.exercises._common import AXIS_LAGS, controller_states, nearest_names, pid_from_values
 from lab_modules.loops.flexible_rotor_loop import (
     LOOP_OUTPUTS,
@@ -449,7 +449,23 @@ class SensorPlacement(Exercise):
     def open_loops(self, values: dict) -> dict:
         return {f"bearing PID, {values['feedback']} x": loop_at_plant_input(values)}
 
-    def analyse(self, values: dict) -> Analysis:
+    def analyse_panel(self, values: dict, panel: str) -> Analysis:
+        """The Scope: the modes, the largest stable gain and the closed loop's damping; the Pole map:
+        the open and closed loop's poles; the Analysis tab: the step response, the poles' paths over
+        the sensor positions and the damping along them."""
+        if panel == ANALYSIS:
+            return Analysis([], {}, [], self._plots(values))
+        n = int(values["modes"])
+        r = rotor(values["modal_damping_percent"] / 100)
+        if panel == POLE_MAP:
+            return Analysis([], {"open-loop plant": np.linalg.eigvals(np.asarray(
+                                    modal_plant(r, GEOMETRY.bearing_m + values["sensor_offset_mm"] * 1e-3, n,
+                                                values["sensor_lag_us"] * 1e-6).A)),
+                                 "closed loop": continuous_poles(loop(values))}, [])
+        return self._readouts(values)
+
+    @staticmethod
+    def _readouts(values: dict) -> Analysis:
         n = int(values["modes"])
         r = rotor(values["modal_damping_percent"] / 100)
         frequencies = r.natural_frequencies_hz(n)
@@ -475,13 +491,10 @@ class SensorPlacement(Exercise):
                   "(mode 1 is the rigid tilting about the ball bearing).")]
         if not stable(closed):
             notes.insert(0, f"Unstable: {unstable_mode_sentence(modes_s)}.")
-        poles = {"open-loop plant": np.linalg.eigvals(np.asarray(
-                     modal_plant(r, GEOMETRY.bearing_m + values["sensor_offset_mm"] * 1e-3, n,
-                                 values["sensor_lag_us"] * 1e-6).A)),
-                 "closed loop": continuous_poles(closed)}
-        return Analysis(readouts, poles, notes=notes, plots=self._plots(values))
+        return Analysis(readouts, {}, notes=notes)
 
-    def _plots(self, values: dict) -> list:
+    @staticmethod
+    def _plots(values: dict) -> list:
         n = int(values["modes"])
         paths = pole_paths(values)
         colours = ("#1f77b4", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2")
