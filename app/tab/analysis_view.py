@@ -109,7 +109,7 @@ class AnalysisView:
             if self.mode_picker is not None:
                 self.mode_picker.pick(self.mode_picker.dropdown.value)
 
-    # -- what the browser shows (on the worker) ---------------------------------------------
+    # -- what the browser shows (on the event loop: quick) -----------------------------------
     def set_shown(self, panel: str, shown: bool) -> None:
         """The browser shows (or hides) ``panel``: a panel out of date is analysed now."""
         with self.wakeup:
@@ -120,7 +120,7 @@ class AnalysisView:
             self.wakeup.notify()
         self.turn_wake.set()                      # work for a panel now hidden is moot
         if shown and panel in (WORKSHEET, WORKSHEET_BESIDE):
-            self.on_worksheet()
+            self.worker.post("worksheet shown", self.on_worksheet)
 
     # -- the analysis thread ---------------------------------------------------------------
     def ask(self, generation: int, exercise: Exercise, values: dict) -> None:

@@ -32,6 +32,7 @@ import viser
 
 from app.infra import layout, viser_internals
 from app.infra.store import Store
+from app.infra.traffic import callback
 from app.panels import entry, scope, worksheets
 from app.panels.actions import ActionPanel
 from app.panels.docks import Docks
@@ -301,10 +302,10 @@ class LabSession:
             measure_claims()                      # the worksheet floats beside the charts: in view
 
     def _add_beacon(self, gui, panel: str) -> None:
-        """The browser says when this panel tab is shown or hidden (its analyses are computed then)."""
-        viser_internals.visibility_beacon(
-            gui, panel, self.worker.on(("panel", panel), lambda: self.analysis.set_shown(panel, True)),
-            self.worker.on(("panel", panel), lambda: self.analysis.set_shown(panel, False)))
+        """The browser says when this panel tab is shown or hidden (its analyses are computed then);
+        recorded at once on the event loop, not behind the tab's other events."""
+        viser_internals.visibility_beacon(gui, panel, callback(lambda _: self.analysis.set_shown(panel, True)),
+                                          callback(lambda _: self.analysis.set_shown(panel, False)))
 
     def _still_current(self) -> Callable[[], bool]:
         """Whether the generation being built still owns the tab (for parts that run on threads)."""

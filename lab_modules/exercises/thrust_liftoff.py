@@ -36,7 +36,7 @@ import numpy as np
 from lab_modules import analysis
 from lab_modules.claims import Claim
 from lab_modules.estimators.thrust_kalman import PAPER_Q_N2, H
-from lab_modules.exercises import POLE_MAP, SCOPE, Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises import POLE_MAP, SCOPE, Analysis, Chart, Exercise, Plot, Series, remembered
 from lab_modules.exercises._common import pairs
 from lab_modules.loops.thrust_liftoff_loop import (
     ThrustSetup,
@@ -179,6 +179,12 @@ def liftoff(values: dict, source: str, duration_s: float = LIFTOFF_RUN_S, **chan
     return sim.run(duration_s), sim.status_message() or "ok"
 
 
+@remembered()
+def liftoff_runs(values: dict) -> dict[str, tuple[dict, str]]:
+    """``liftoff`` of both feedback sources."""
+    return {src: liftoff(values, src) for src in SOURCES}
+
+
 def steady_window_start_s(duration_s: float) -> float:
     """Start of the steady-state window: ``STEADY_FROM_S``, or half of a shorter run."""
     return min(STEADY_FROM_S, 0.5 * duration_s)
@@ -279,20 +285,13 @@ class ThrustLiftoff(Exercise):
         if panel == POLE_MAP:
             return Analysis([], self._poles(values), [])
         s = setup(values)
-        runs = {src: liftoff(values, src) for src in SOURCES}
-        figures = {src: liftoff_figures(runs[src][0], s.start_position_m) for src in SOURCES}
-        lifted = [
-            ("Noise-free overshoot, raw PID", figures["measured"]["overshoot_percent"], "%"),
-            ("Noise-free overshoot, filter-PID", figures["estimated"]["overshoot_percent"], "%"),
-            ("Noise-free peak time", figures["measured"]["peak_time_s"] * 1e3, "ms"),
-            ("Noise-free 2 % settling time", figures["measured"]["settling_time_s"], "s"),
-        ]
-        plots = [self._liftoff_plot(runs), self._gain_plot(s.design), self._current_noise_plot(s)]
-        return Analysis(lifted, {}, [], plots)
+        plots = [self._liftoff_plot(liftoff_runs(values)), self._gain_plot(s.design), self._current_noise_plot(s)]
+        return Analysis([], {}, [], plots)
 
     @staticmethod
     def _linear_figures(values: dict) -> Analysis:
-        """Readouts and notes of the linear analysis (poles, Lyapunov noise, the filter's steady state)."""
+        """Readouts and notes of the linear analysis (poles, Lyapunov noise, the filter's steady state)
+        and of the noise-free lift-offs."""
         s = setup(values)
         b = s.bearing
         gain, _, P_corr = s.design.steady_state
@@ -328,6 +327,14 @@ class ThrustLiftoff(Exercise):
             ("Filter error pole damping", damping, ""),
             ("Largest error of the Taylor Φ against the exact one", float(np.max(np.abs(Phi - Phi_e))), ""),
         ]
+        runs = liftoff_runs(values)
+        figures = {src: liftoff_figures(runs[src][0], s.start_position_m) for src in SOURCES}
+        lifted = [
+            ("Noise-free overshoot, raw PID", figures["measured"]["overshoot_percent"], "%"),
+            ("Noise-free overshoot, filter-PID", figures["estimated"]["overshoot_percent"], "%"),
+            ("Noise-free peak time", figures["measured"]["peak_time_s"] * 1e3, "ms"),
+            ("Noise-free 2 % settling time", figures["measured"]["settling_time_s"], "s"),
+        ]
         notes = [
             ("Discretisation at T = 0.1 ms, Taylor (eq. 9-11) vs exact: "
              f"Φ (Taylor) = {one_line(Phi, 9)}, e^(AT) = {one_line(Phi_e, 9)}; "
@@ -338,7 +345,7 @@ class ThrustLiftoff(Exercise):
         note = instability_note(s)
         if note:
             notes.insert(0, note)
-        return Analysis(readouts, {}, notes)
+        return Analysis(readouts[:6] + lifted + readouts[6:], {}, notes)
 
     @staticmethod
     def _poles(values: dict) -> dict[str, np.ndarray]:
