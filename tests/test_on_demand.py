@@ -17,14 +17,12 @@ from lab_modules.exercises import (
     POLE_MAP,
     SCOPE,
     Analysis,
-    Memo,
-    ReadValues,
     get,
     kalman_noise,
-    remembered,
     results,
     sensor_placement,
 )
+from lab_modules.memo import Memo, ReadValues, remembered
 from tests.example_exercise import contract_exercises
 from tests.wsclient import RawTab, lab_process, run_async
 

@@ -1,6 +1,6 @@
 """``python -m app bench --analysis``: the CPU a tab's analyses cost, per exercise.
 
-Measured the way a tab computes them (``app.panels.panel_analyses``, the pole map's and the
+Measured the way a tab computes them (``lab_modules.evaluation.panel_analyses``, the pole map's and the
 Analysis tab's views included), each exercise in a fresh process whose simulation kernels are
 compiled (as in a running lab) but whose analyses are not yet remembered:
 
@@ -24,19 +24,11 @@ import statistics
 import time
 
 from app.panels import plots, pole_map
-from app.panels.panel_analyses import margin_results, panel_results
 from app.panels.text import readouts_table
-from lab_modules.exercises import (
-    ANALYSIS,
-    POLE_MAP,
-    SCOPE,
-    Analysis,
-    Exercise,
-    ReadValues,
-    get,
-    registry,
-    results,
-)
+from lab_modules.evaluation import poles
+from lab_modules.evaluation.panel_analyses import margin_results, panel_results
+from lab_modules.exercises import ANALYSIS, POLE_MAP, SCOPE, Analysis, Exercise, get, registry, results
+from lab_modules.memo import ReadValues
 from lab_modules.parameters import Parameter
 
 MOVES = 3
@@ -75,7 +67,7 @@ def scope_job(exercise: Exercise, values: dict) -> Analysis:
 def pole_job(exercise: Exercise, values: dict, scope: Analysis) -> None:
     """The Pole map's results, their view (mode names, root locus) and the charts' data."""
     for result in panel_results(exercise, values, POLE_MAP) or (scope,):
-        view = pole_map.view(exercise, values, result.poles)
+        view = poles.view(exercise, values, result.poles)
         pole_map.charts(view)
         pole_map.table_markdown(view)
 

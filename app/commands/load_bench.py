@@ -7,26 +7,31 @@ arrays), sends a camera message on connect and every few seconds, and moves
 the position-noise slider every few seconds.  Clients are added in steps up
 to N; at each step every tab's scope updates per second, bytes per second and
 the server's CPU time (all its processes, HAProxy included, from ``/proc``)
-are measured over a fixed window.  The largest step at which every tab still
-gets ``MIN_UPDATES_PER_S`` scope updates per second is the capacity.  The run
-stops at the first step that fails, so it is bounded in time.
+are measured over a fixed window, and every tab that stalled in it is named with
+the reason (``Tab.stall``: no scope update for more than ``STALL_S``, and whether
+any other message came meanwhile, or the connection ended: closed by the server
+with its close code, lost, or a frame the tab could not read).  The largest step
+at which every tab still gets ``MIN_UPDATES_PER_S`` scope updates per second and
+none stalled is the capacity.  The run stops at the first step that fails, so it
+is bounded in time.
 
 ``--breakdown`` also attributes the received bytes to message kinds (scope
 chart data, readouts, 3D view, ...).  ``--mix`` spreads the tabs over every
 exercise (each switches to its own after the lab opens) and over the panel tabs
 (``PANEL_MIX``: half on the Scope, the others on the Pole map or the Analysis tab,
 reported as the browser's beacon does); each moves a control its exercise's
-readouts depend on (``mix_plan``).
+Scope readouts depend on (``app.commands.tab_mix``).  The figures of a
+step and their printing: ``app.commands.load_report``.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import itertools
 import json
 import os
 import random
-import re
 import socket
 import statistics
 import subprocess
@@ -40,32 +45,25 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import msgspec
-import numpy as np
 import viser
 import websockets.asyncio.client
 import zstandard
 
+from app.commands.load_report import MIN_UPDATES_PER_S, Step, print_step, print_summary
+from app.commands.tab_mix import KALMAN_NOISE_MOVE, PANEL_MIX, SliderMove, mix_move
 from app.infra.viser_internals import SHOWN_LABEL
-from app.panels.text import cell
-from lab_modules.exercises import SCOPE, ReadValues, get, registry, results
+from lab_modules.exercises import SCOPE, get, registry
 
 ROOT = Path(__file__).resolve().parents[2]
 PROTOCOL = f"viser-v{viser.__version__}"      # the subprotocol a viser client of this version offers
-MIN_UPDATES_PER_S = 20.0
 TARGET_BYTES_PER_S = 150e3
 CAMERA_PERIOD_S = 3.0                         # each tab sends a camera message this often ...
 SLIDER_EVERY = 3                              # ... and moves a slider with every third one (an analysis: ~0.1 s CPU)
 CONNECT_RATE_PER_S = 10.0                     # new tabs per second while ramping up
 SETTLE_S = 4.0                                # after the last new tab of a step, before measuring ...
 SETTLE_MAX_S = 90.0                           # ... and until every tab streams (a busy machine builds slowly)
-SLIDER_LABEL = "Position sensor noise"
-SLIDER_VALUES = (1.33, 2.0)
 WORKER_HEADER = "X-Lab-Worker"                # set by the generated HAProxy configuration
-#: An analysis readout of kalman_noise that a move of the position-noise slider changes: the time from a
-#: move to its new value in the tab is the slider-to-readout latency (the scope-window rows change anyway)
-READOUT_ROW = re.compile(r"RMS displacement, measured feedback \| *([^|]+?) *\|")
-#: With ``--mix``, the panel tab the k-th tab shows (its exercise: the k-th of the lab's, in turn)
-PANEL_MIX = ("Scope", "Pole map", "Scope", "Analysis")
+STALL_S = 2.0                                 # a tab with no scope update for longer than this has stalled
 
 
 def scope_titles(exercise_name: str) -> tuple[str, ...]:
@@ -84,6 +82,13 @@ def decode_frame(frame: bytes) -> tuple[list[dict], list[int], int]:
     return payload["messages"], list(payload["binaryBufferLengths"]), compressed_len
 
 
+def _closing(error: websockets.ConnectionClosed) -> str:
+    """Who closed the connection, with which code and reason."""
+    if error.rcvd is not None:
+        return f"closed by server with code {error.rcvd.code}" + (f" ({error.rcvd.reason})" if error.rcvd.reason else "")
+    return "connection lost without a close frame"
+
+
 def _binary_bytes(value, lengths: list[int]) -> int:
     """Bytes of the binary buffers a decoded message refers to."""
     if isinstance(value, dict):
@@ -95,65 +100,15 @@ def _binary_bytes(value, lengths: list[int]) -> int:
     return 0
 
 
-@dataclass(frozen=True)
-class Plan:
-    """What a tab does with its exercise: the scope chart titles, the slider it moves between two
-    values, and the readout row (``| label | value |``) whose change answers a move."""
-
-    exercise: str
-    titles: tuple[str, ...]
-    slider_label: str = SLIDER_LABEL
-    slider_values: tuple[float, float] = SLIDER_VALUES
-    readout_row: re.Pattern = READOUT_ROW
-
-
-MIX_RUN_S = 0.3                 # simulated seconds a mix tab's moved setting must run without stopping
-
-
-def mix_plan(exercise_name: str) -> Plan:
-    """The first plain numeric slider the exercise's Scope readouts read with two values 10 % (or 2 %
-    of its range) apart, from its default or else from the middle of its range, at which the
-    simulation keeps running (a stopped run sends no scope updates) and a readout differs; that
-    readout answers a move."""
-    exercise = get(exercise_name)
-    values = exercise.resolve({})
-
-    def scope_readouts(at: dict) -> tuple[list, set]:
-        read = ReadValues(at)
-        *_, last = results(exercise.analyse_panel(read, SCOPE))
-        return last.readouts, read.read
-
-    def runs(at: dict) -> bool:
-        simulation = exercise.simulation(at)
-        simulation.advance(round(MIX_RUN_S / simulation.sample_time_s))
-        return not simulation.status_message()
-    _, read = scope_readouts(values)
-    for parameter in exercise.parameters:
-        if parameter.choices or parameter.log or parameter.integer or parameter.name not in read:
-            continue
-        low, high = exercise.parameter_ranges(values).get(parameter.name, (parameter.minimum, parameter.maximum))
-        for start in (float(parameter.default), 0.5 * (low + high)):
-            moved = float(f"{min(max(1.1 * start if start else low + 0.02 * (high - low), low), high):.4g}")
-            pair = [{**values, parameter.name: value} for value in (start, moved)]
-            if not all(runs(at) for at in pair):
-                continue
-            (before, _), (after, _) = (scope_readouts(at) for at in pair)
-            changed = next((label for (label, a, _), (_, b, _) in zip(before, after) if a != b), None)
-            if changed is not None:
-                label = f"{parameter.label} [{parameter.unit}]" if parameter.unit else parameter.label
-                return Plan(exercise_name, scope_titles(exercise_name), label, (start, moved),
-                            re.compile(re.escape(cell(changed)) + r" \| *([^|]+?) *\|"))
-    return Plan(exercise_name, scope_titles(exercise_name), "", SLIDER_VALUES, re.compile(r"(?!)"))
-
-
 @dataclass
 class Tab:
     """One headless tab: a websocket client that receives and decodes what the lab sends."""
 
     url: str
-    plan: Plan
+    titles: tuple[str, ...]                   # scope chart titles
     breakdown: bool = False
     slider_every: int = SLIDER_EVERY           # 0: the tab never moves a slider
+    move: SliderMove = KALMAN_NOISE_MOVE       # the slider it moves and the readout that answers
     switch_to: str | None = None              # the title of the exercise to choose once the lab opens
     panel: str = SCOPE                        # the panel tab it shows
     received_bytes: int = 0
@@ -165,10 +120,12 @@ class Tab:
     worker: str | None = None
     connected: bool = False
     closed: str | None = None                 # why the connection ended
+    ended_at: float | None = None             # when it ended before the bench stopped it
+    frame_times: list[float] = field(default_factory=list)   # arrival of every frame (any message)
     scope_uuid: str | None = None
     answers: list = field(default_factory=list)               # replies due to the lab's requests
     moved_at: float | None = None             # the newest slider move whose readout has not come yet
-    readout: str | None = None                # the newest value of READOUT_ROW
+    readout: str | None = None                # the newest value of ``move.readout_row``
     latencies: list[tuple[float, float]] = field(default_factory=list)   # (arrival, seconds since the move)
 
     def _kind(self, message: dict) -> str:
@@ -179,12 +136,12 @@ class Tab:
             props = message["props"]
             label = props.get("label") or props.get("title") or ""
             if kind == "GuiUplotMessage":
-                self.kinds[message["uuid"]] = "scope chart" if label in self.plan.titles else "static chart"
-                if label == self.plan.titles[0]:
+                self.kinds[message["uuid"]] = "scope chart" if label in self.titles else "static chart"
+                if label == self.titles[0]:
                     self.scope_uuid = message["uuid"]
             elif kind == "GuiMarkdownMessage":
                 self.kinds[message["uuid"]] = "markdown (readouts, status, tables)"
-            elif kind == "GuiSliderMessage" and self.plan.slider_label and label.startswith(self.plan.slider_label):
+            elif kind == "GuiSliderMessage" and self.move.label and label.startswith(self.move.label):
                 self.slider = message["uuid"]
             elif kind == "GuiDropdownMessage" and label == "Exercise" and self.switch_to is not None:
                 self.answers.append({"type": "GuiUpdateMessage", "uuid": message["uuid"],
@@ -199,6 +156,7 @@ class Tab:
 
     def receive(self, frame: bytes, now: float) -> None:
         self.received_bytes += len(frame)
+        self.frame_times.append(now)
         messages, lengths, compressed = decode_frame(frame)
         sizes = [len(msgspec.msgpack.encode(m)) for m in messages] if self.breakdown else None
         total = sum(sizes) if sizes else 0
@@ -210,7 +168,7 @@ class Tab:
             if (message["type"] == "GuiUpdateMessage" and message["uuid"] == self.scope_uuid
                     and "data" in message["updates"]):
                 self.scope_times.append(now)
-            self._read_readout(message, now)
+            self.read_readout(message, now)
             if self.breakdown:
                 share = compressed * sizes[index] / total if total else 0.0
                 self.kind_bytes[kind] += share + _binary_bytes(message, lengths)
@@ -218,9 +176,9 @@ class Tab:
         if self.breakdown:
             self.kind_bytes["frame headers and padding"] += len(frame) - compressed - sum(lengths)
 
-    def _read_readout(self, message: dict, now: float) -> None:
+    def read_readout(self, message: dict, now: float) -> None:
         content = (message.get("updates") or message.get("props") or {}).get("_markdown")   # viser's name
-        found = self.plan.readout_row.search(content) if isinstance(content, str) else None
+        found = self.move.readout_row.search(content) if isinstance(content, str) else None
         if found is None or found.group(1) == self.readout:
             return
         if self.moved_at is not None and self.readout is not None:
@@ -232,7 +190,7 @@ class Tab:
         """Slider-to-readout latencies [s] of the readouts that arrived in [start, end)."""
         return [latency for arrival, latency in self.latencies if start <= arrival < end]
 
-    async def _inputs(self, connection, stop: asyncio.Event) -> None:
+    async def _inputs(self, outbox: asyncio.Queue, stop: asyncio.Event) -> None:
         """A camera message at once and then, like a student, every few seconds a camera
         message, and every third time also a slider move."""
         turn = 0
@@ -243,15 +201,20 @@ class Tab:
                       "position": [0.3 + angle, 0.3, 0.3], "fov": 1.0, "near": 0.01, "far": 100.0,
                       "image_height": 768, "image_width": 386, "look_at": [0.0, 0.0, 0.0],
                       "up_direction": [0.0, 0.0, 1.0]}
-            await connection.send(msgspec.msgpack.encode(camera))
+            outbox.put_nowait(camera)
             if self.slider is not None and self.slider_every and turn % self.slider_every == self.slider_every - 1:
-                move = {"type": "GuiUpdateMessage", "uuid": self.slider,
-                        "updates": {"value": self.plan.slider_values[turn // self.slider_every % 2]}}
-                await connection.send(msgspec.msgpack.encode(move))
+                outbox.put_nowait({"type": "GuiUpdateMessage", "uuid": self.slider,
+                                   "updates": {"value": self.move.values[turn // self.slider_every % 2]}})
                 self.moved_at = time.perf_counter()
             turn += 1
             with contextlib.suppress(asyncio.TimeoutError):
                 await asyncio.wait_for(stop.wait(), CAMERA_PERIOD_S * random.uniform(0.8, 1.2))
+
+    async def _write(self, connection, outbox: asyncio.Queue) -> None:
+        """The tab's only writer: like a browser, whose socket sends never hold up its reading,
+        the reader only queues its answers here."""
+        while True:
+            await connection.send(msgspec.msgpack.encode(await outbox.get()))
 
     async def run(self, stop: asyncio.Event) -> None:
         try:
@@ -260,7 +223,9 @@ class Tab:
                     open_timeout=60) as connection:
                 self.connected = True
                 self.worker = connection.response.headers.get(WORKER_HEADER)
-                inputs = asyncio.create_task(self._inputs(connection, stop))
+                outbox: asyncio.Queue = asyncio.Queue()
+                helpers = [asyncio.create_task(self._inputs(outbox, stop)),
+                           asyncio.create_task(self._write(connection, outbox))]
                 try:
                     while not stop.is_set():
                         try:
@@ -269,14 +234,50 @@ class Tab:
                             continue
                         self.receive(frame, time.perf_counter())
                         while self.answers:
-                            await connection.send(msgspec.msgpack.encode(self.answers.pop(0)))
+                            outbox.put_nowait(self.answers.pop(0))
+                        if helpers[1].done():                # the writer failed: its error ends the tab
+                            helpers[1].result()
                 finally:
-                    inputs.cancel()
-                    with contextlib.suppress(asyncio.CancelledError, websockets.ConnectionClosed):
-                        await inputs
+                    for helper in helpers:
+                        helper.cancel()
+                    await asyncio.gather(*helpers, return_exceptions=True)
                 self.closed = "stopped"
+        except websockets.ConnectionClosed as error:
+            self._ended(_closing(error))
         except (TimeoutError, OSError, websockets.WebSocketException) as error:
-            self.closed = f"{type(error).__name__}: {error}"
+            self._ended(f"connection error: {type(error).__name__}: {error}")
+        except Exception as error:  # noqa: BLE001 - a frame the tab could not read ends it, with the reason
+            self._ended(f"reader exception: {type(error).__name__}: {error}")
+
+    def _ended(self, why: str) -> None:
+        self.closed, self.ended_at = why, time.perf_counter()
+
+    def longest_gap(self, start: float, end: float) -> tuple[float, float, float]:
+        """(seconds, start, end) of the longest time without a scope update in [start, end)."""
+        arrivals = [start] + [t for t in self.scope_times if start <= t < end] + [end]
+        return max((b - a, a, b) for a, b in itertools.pairwise(arrivals))
+
+    def stall(self, start: float, end: float, limit_s: float = STALL_S) -> str | None:
+        """Why the tab stalled in [start, end): it ended early, or no scope update came for more
+        than ``limit_s`` (then whether any message came in the longest such gap, and whether the
+        gap lasted to the end: a silent connection, not a slow server); None if it did not."""
+        if self.ended_at is not None and self.ended_at < end:
+            return self.closed
+        gap_s, gap_start, gap_end = self.longest_gap(start, end)
+        if gap_s <= limit_s:
+            return None
+        frames = sum(gap_start < t < gap_end for t in self.frame_times)
+        until = " until the end of the window" if gap_end == end else ""   # else it streamed again
+        why = (f"messages but no scope update for {gap_s:.1f} s{until} ({frames} frames)" if frames
+               else f"no message at all for {gap_s:.1f} s{until}")
+        if gap_start > start:
+            return why
+        before = [t for t in self.scope_times if t < start]        # the window began in the gap
+        last_frame = max((t for t in self.frame_times if t < start), default=None)
+        if not before:
+            return why + f"; no scope update since it opened ({len(self.frame_times)} frames in all)"
+        return why + (f"; before the window {len(before)} scope updates, the last {start - before[-1]:.1f} s "
+                      f"before it, the last message {start - last_frame:.1f} s before it")
 
     def rate(self, start: float, end: float) -> float:
         """Scope updates per second in [start, end)."""
@@ -360,44 +361,6 @@ def lab_server(port: int, workers: int, exercise: str, log: Path,
 
 # -- the measurement ---------------------------------------------------------------
 
-@dataclass
-class Step:
-    clients: int
-    updates_min: float
-    updates_median: float
-    kbytes_per_s_median: float
-    kbytes_per_s_max: float
-    server_cores: float           # CPU seconds per wall second of all server processes
-    client_cores: float           # the same for this benchmark's own process (the tabs)
-    connected: int
-    updates: int                  # scope updates received by all tabs in the window
-    window_s: float
-    readout_latencies_s: list[float] = field(default_factory=list)   # slider move -> new readout, all tabs
-
-    @property
-    def ok(self) -> bool:
-        return self.connected == self.clients and self.updates_min >= MIN_UPDATES_PER_S
-
-    def row(self) -> dict:
-        return {"clients": self.clients, "updates_per_s_min": round(self.updates_min, 1),
-                "updates_per_s_median": round(self.updates_median, 1),
-                "kB_per_s_median": round(self.kbytes_per_s_median, 1),
-                "kB_per_s_max": round(self.kbytes_per_s_max, 1),
-                "server_cores": round(self.server_cores, 3),
-                "server_core_percent_per_tab": round(100 * self.server_cores / self.clients, 2),
-                "server_cpu_ms_per_update": round(1e3 * self.server_cores * self.window_s / max(self.updates, 1), 3),
-                "server_core_percent_per_tab_at_25_per_s": round(
-                    100 * 25 * self.server_cores * self.window_s / max(self.updates, 1), 2),
-                "bench_client_cores": round(self.client_cores, 3),
-                "slider_moves_answered": len(self.readout_latencies_s),
-                "readout_latency_s_median": _rounded(statistics.median(self.readout_latencies_s)
-                                                     if self.readout_latencies_s else None),
-                "readout_latency_s_p95": _rounded(float(np.percentile(self.readout_latencies_s, 95))
-                                                  if self.readout_latencies_s else None),
-                "readout_latency_s_max": _rounded(max(self.readout_latencies_s, default=None)),
-                "connected": self.connected, "ok": self.ok}
-
-
 async def _measure(url: str, steps: list[int], window_s: float, server_pid: int, new_tab,
                    report, all_steps: bool) -> tuple[list[Step], list[Tab]]:
     """``new_tab(url, k)``: the k-th tab."""
@@ -427,7 +390,9 @@ async def _measure(url: str, steps: list[int], window_s: float, server_pid: int,
                         max(rates_bytes), server_cpu / (end - start), own_cpu / (end - start),
                         sum(t.connected and t.closed is None for t in tabs),
                         sum(round(r * (end - start)) for r in rates), end - start,
-                        [x for t in tabs for x in t.latencies_in(start, end)])
+                        [x for t in tabs for x in t.latencies_in(start, end)],
+                        [{"tab": number, "worker": t.worker, "why": why}
+                         for number, t in enumerate(tabs, 1) if (why := t.stall(start, end))])
             results.append(step)
             report(step)
             if not step.ok and not all_steps:
@@ -453,10 +418,6 @@ async def _settle(tabs: list[Tab]) -> None:
     await asyncio.sleep(min(SETTLE_S, max(0.0, SETTLE_MAX_S - (time.perf_counter() - began))))
 
 
-def _rounded(seconds: float | None) -> float | None:
-    return None if seconds is None else round(seconds, 3)
-
-
 def ramp(clients: int, steps: int) -> list[int]:
     """Client counts of the steps up to ``clients``."""
     return sorted({max(1, round(clients * (k + 1) / steps)) for k in range(steps)})
@@ -464,17 +425,17 @@ def ramp(clients: int, steps: int) -> list[int]:
 
 def tab_factory(exercise: str, breakdown: bool, slider_every: int, mix: bool):
     """The tabs' maker: each on ``exercise`` with the Scope shown, or with ``mix`` the k-th on the
-    k-th exercise (``registry`` order, in turn) and on ``PANEL_MIX[k]``."""
+    k-th exercise (``registry`` order, in turn) and on ``PANEL_MIX[k]`` (``app.commands.tab_mix``)."""
     if not mix:
-        plan = Plan(exercise, scope_titles(exercise))
-        return lambda url, k: Tab(url, plan, breakdown, slider_every)
+        titles = scope_titles(exercise)
+        return lambda url, k: Tab(url, titles, breakdown, slider_every)
     names = list(registry())
-    plans = {name: mix_plan(name) for name in names}
+    moves = {name: mix_move(name) for name in names}
 
     def new_tab(url: str, k: int) -> Tab:
         name = names[k % len(names)]
-        return Tab(url, plans[name], breakdown, slider_every, None if name == exercise else get(name).title,
-                   PANEL_MIX[k % len(PANEL_MIX)])
+        return Tab(url, scope_titles(name), breakdown, slider_every, moves[name],
+                   switch_to=None if name == exercise else get(name).title, panel=PANEL_MIX[k % len(PANEL_MIX)])
     return new_tab
 
 
@@ -514,17 +475,7 @@ def main(clients: int, workers: int, steps: int, window_s: float, exercise: str,
          mix: bool = False) -> int:
     def report(step: Step) -> None:
         if not as_json:
-            r = step.row()
-            print(f"  {r['clients']:4d} tabs: scope updates/s min {r['updates_per_s_min']:5.1f} "
-                  f"median {r['updates_per_s_median']:5.1f}; {r['kB_per_s_median']:6.1f} kB/s per tab; "
-                  f"server {r['server_cores']:.2f} cores = {r['server_core_percent_per_tab']:.2f} % of a core "
-                  f"per tab ({r['server_cpu_ms_per_update']:.2f} ms per update = "
-                  f"{r['server_core_percent_per_tab_at_25_per_s']:.2f} % at 25/s); bench clients {r['bench_client_cores']:.2f} cores"
-                  + (f"; slider move to readout: median {r['readout_latency_s_median']:.2f} s, "
-                     f"p95 {r['readout_latency_s_p95']:.2f} s, max {r['readout_latency_s_max']:.2f} s "
-                     f"({r['slider_moves_answered']} moves)"
-                     if r["slider_moves_answered"] else "")
-                  + ("" if step.ok else "  <- below target"), flush=True)
+            print_step(step)
 
     if not as_json:
         moves = f"a slider move every ~{CAMERA_PERIOD_S * slider_every:.0f} s" if slider_every else "no slider moves"
@@ -539,10 +490,5 @@ def main(clients: int, workers: int, steps: int, window_s: float, exercise: str,
     if as_json:
         print(json.dumps(result, indent=2))
     else:
-        print(f"largest step with every tab >= {MIN_UPDATES_PER_S:.0f} scope updates/s: "
-              f"{result['largest_clients_at_min_updates']} tabs")
-        if "bytes_by_kind_per_tab_run" in result:
-            print("bytes per tab by message kind (" + result["breakdown_note"] + "):")
-            for kind, value in result["bytes_by_kind_per_tab_run"].items():
-                print(f"  {kind:<45} {value / 1e3:9.1f} kB")
+        print_summary(result)
     return 0

@@ -11,9 +11,9 @@ supersedes what is under way (it stops at its next result), and hiding a panel s
 Each panel's first result is shown at once (the readouts after a move, or the panel just
 opened); fuller results take turns with the other tabs' (``app.tab.turns``), so one process's
 analyses never crowd out its streaming.  Every result is remembered per setting of the
-parameter values it read (``lab_modules.exercises.Memo``), shared by the process's tabs: a
+parameter values it read (``lab_modules.memo.Memo``), shared by the process's tabs: a
 slider that an analysis never reads does not make it run again, and a class that opens an
-exercise at its defaults computes each panel once (``app.panels.panel_analyses``).
+exercise at its defaults computes each panel once (``lab_modules.evaluation.panel_analyses``).
 """
 
 from __future__ import annotations
@@ -24,13 +24,14 @@ import time
 import traceback
 from collections.abc import Callable, Iterator
 
-from app.panels import margins, mode_picker, pole_map
-from app.panels.panel_analyses import margin_results, panel_results, remembered_margins
+from app.panels import mode_picker, pole_map
 from app.panels.plots import AnalysisPlots
 from app.panels.text import readout_rows, readouts_table
 from app.tab.state import LabState
 from app.tab.turns import Turns
 from app.tab.worker import TabWorker
+from lab_modules.evaluation import margins, poles
+from lab_modules.evaluation.panel_analyses import margin_results, panel_results, remembered_margins
 from lab_modules.exercises import ANALYSIS, PANELS, POLE_MAP, SCOPE, Analysis, Exercise, results
 
 #: The process's analyses take turns (app/tab/turns.py): one at a time shares the interpreter with streaming.
@@ -76,7 +77,7 @@ class AnalysisView:
         self.pole_tab = None
         self.pole_status = None
         self.pole_table = None
-        self.shown_poles: pole_map.PoleView | None = None
+        self.shown_poles: poles.PoleView | None = None
         self.mode_picker: mode_picker.ModePicker | None = None
 
     # -- what a new exercise shows first (on the worker, holding the GUI lock) ------------------
@@ -242,7 +243,7 @@ class AnalysisView:
     # -- the Pole map ----------------------------------------------------------------------
     def _pole_steps(self, generation: int, exercise: Exercise, values: dict, serial: int) -> Iterator[None]:
         for result in panel_results(exercise, values, POLE_MAP) or self._from_scope(serial):
-            view = pole_map.view(exercise, values, result.poles)   # mode names and root locus: cached per setting
+            view = poles.view(exercise, values, result.poles)   # mode names and root locus: cached per setting
             with self.gui_lock:
                 if not self._showing(generation, serial):
                     return
@@ -250,7 +251,7 @@ class AnalysisView:
             yield
         self._finished(POLE_MAP, generation, serial)
 
-    def _draw_poles(self, view: pole_map.PoleView) -> None:
+    def _draw_poles(self, view: poles.PoleView) -> None:
         """Both maps, the picker and the table (made with the first view; call holding ``gui_lock``)."""
         gui = self.client.gui
         if self.mode_picker is None:
@@ -289,7 +290,7 @@ class AnalysisView:
     def _show_panel(self, generation: int, serial: int, result: Analysis, loops: tuple | None) -> bool:
         """The Analysis tab's readouts and plots, with the margins (``loops``; None: not yet)."""
         readouts, plots, notes = loops if loops is not None else ([("Margins", "computing …", "")], [], [])
-        shown = margins.with_margins(result, (readouts, plots, notes))
+        shown = margins.with_margins(result, margins.MarginView(readouts, plots, notes))
         if loops is not None and not shown.plots:
             shown.notes.append(NO_PLOTS)
         with self.gui_lock:

@@ -3,12 +3,11 @@ any of them generically (parameters, scope charts, pole map, readouts)."""
 
 from __future__ import annotations
 
+import enum
 import importlib
-import threading
-from collections import OrderedDict
-from collections.abc import Callable, Hashable, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass, field
-from typing import Protocol, TypeVar
+from typing import Protocol
 
 import numpy as np
 
@@ -110,6 +109,16 @@ def _last(found: Iterator[Analysis], first: Analysis | None = None) -> Analysis:
     return last
 
 
+class PoleCategory(enum.Enum):
+    """What a pole set of ``Analysis.poles`` is (``Exercise.pole_categories``): the pole map draws
+    each category in one colour in every exercise and lists the categories in this order."""
+
+    PLANT = "plant"                    # the plant, open loop (no feedback)
+    CLOSED_LOOP = "closed loop"        # plant, filter and controller together
+    FILTER_ERROR = "filter error"      # a filter's error dynamics (A − A K C), an adaptive weight's error
+    REGULATOR = "regulator"            # a state-feedback regulator (A − B K)
+
+
 @dataclass(frozen=True)
 class Action:
     """A button of an exercise that runs a longer computation on demand (a Monte-Carlo run ...).
@@ -182,7 +191,6 @@ class Exercise:
     #: (parameter, pole set): a common gain factor and the closed-loop set of ``Analysis.poles`` it
     #: moves; the pole map draws that set's paths as the factor sweeps its range (root locus)
     locus: tuple[str, str] | None = None
-
     def resolve(self, overrides: dict | None = None) -> dict:
         overrides = dict(overrides or {})
         data = overrides.pop("data", None)
@@ -236,6 +244,12 @@ class Exercise:
         They must be affine in the factor (it scales the controller's output)."""
         raise NotImplementedError
 
+    def pole_categories(self, values: dict) -> dict[str, PoleCategory]:
+        """The category of each pole set ``analyse(values)`` reports in ``Analysis.poles``, by set
+        name: the set's colour on the pole map and its place in the table.  Every set an exercise
+        reports is declared (tested).  Default: none."""
+        return {}
+
     def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
         """Physical names of the poles of ``Analysis.poles`` (``poles``, as ``analyse`` returned
         them), by set: one name or None per pole in the set's order, a conjugate pair both
@@ -282,152 +296,6 @@ class Exercise:
         return []
 
 
-# -- pay once: results remembered per setting of the parameters they read -------------------------
-Result = TypeVar("Result")
-_MISSING = object()                 # a value a computation asked for but the values do not hold
-
-
-class ReadValues(dict):
-    """Parameter values that note the names read from them (``read``): what a computation
-    depends on, found by running it.  Reading every value (iterating, copying, comparing) marks
-    them all."""
-
-    def __init__(self, values: dict):
-        super().__init__(values.raw() if isinstance(values, ReadValues) else values)
-        self.read: set = set()
-
-    def raw(self) -> dict:
-        """The values, without marking them read."""
-        return dict(super().items())
-
-    def _read_all(self) -> None:
-        self.read.update(super().keys())
-
-    def __getitem__(self, name):
-        self.read.add(name)
-        return super().__getitem__(name)
-
-    def get(self, name, default=None):
-        self.read.add(name)
-        return super().get(name, default)
-
-    def __contains__(self, name) -> bool:
-        self.read.add(name)
-        return super().__contains__(name)
-
-    def __iter__(self):
-        self._read_all()
-        return super().__iter__()
-
-    def keys(self):
-        self._read_all()
-        return super().keys()
-
-    def values(self):
-        self._read_all()
-        return super().values()
-
-    def items(self):
-        self._read_all()
-        return super().items()
-
-    def copy(self) -> dict:
-        self._read_all()
-        return self.raw()
-
-    def __eq__(self, other) -> bool:
-        self._read_all()
-        return super().__eq__(other)
-
-    def __ne__(self, other) -> bool:
-        return not self == other
-
-    __hash__ = None
-
-
-class Memo:
-    """Results of a computation on parameter values, each remembered per setting of the values it
-    read (``ReadValues``; a slider it never reads does not make it run again) and of its other
-    arguments (``key``), at most ``size`` of them (the least recently used go first).  A setting
-    whose read values cannot be hashed (an uploaded recording) is not remembered.  Thread-safe;
-    two threads asking for the same new setting at once may both compute it."""
-
-    def __init__(self, size: int = 64):
-        self.size = size
-        self.lock = threading.Lock()
-        self.entries: OrderedDict = OrderedDict()        # (key, names, their values) -> result
-        self.read_sets: dict[Hashable, list[tuple]] = {}  # key -> the name tuples it has read, newest first
-
-    def find(self, key: Hashable, values: dict) -> tuple[object, tuple] | None:
-        """(the result remembered for ``values``, the names it read), or None."""
-        raw = values.raw() if isinstance(values, ReadValues) else values
-        with self.lock:
-            for names in self.read_sets.get(key, ()):
-                setting = _setting(raw, names)
-                entry = self.entries.get((key, names, setting)) if setting is not None else None
-                if entry is not None:
-                    self.entries.move_to_end((key, names, setting))
-                    return entry[0], names
-        return None
-
-    def keep(self, key: Hashable, values: dict, read: set, result) -> None:
-        """Remember ``result``, computed from ``values`` reading ``read``."""
-        raw = values.raw() if isinstance(values, ReadValues) else values
-        names = tuple(sorted(read, key=str))
-        setting = _setting(raw, names)
-        if setting is None:
-            return
-        with self.lock:
-            known = self.read_sets.setdefault(key, [])
-            if names in known:
-                known.remove(names)
-            known.insert(0, names)
-            self.entries[(key, names, setting)] = (result,)
-            self.entries.move_to_end((key, names, setting))
-            while len(self.entries) > self.size:
-                (old_key, old_names, _), _ = self.entries.popitem(last=False)
-                if not any(k == old_key and n == old_names for k, n, _ in self.entries):
-                    self.read_sets[old_key].remove(old_names)
-
-    def call(self, key: Hashable, values: dict, compute: Callable[[dict], Result]) -> Result:
-        """``compute(values)``, or its remembered result for this setting.  When ``values`` are
-        themselves being read for an outer memo, what this computation read is marked there."""
-        found = self.find(key, values)
-        if found is None:
-            tracked = ReadValues(values)
-            result, names = compute(tracked), tracked.read
-            self.keep(key, values, names, result)
-        else:
-            result, names = found
-        if isinstance(values, ReadValues):
-            values.read.update(names)
-        return result
-
-
-def _setting(values: dict, names: tuple) -> tuple | None:
-    """The values of ``names`` (missing ones as a marker), or None if one cannot be hashed."""
-    setting = tuple(values.get(name, _MISSING) for name in names)
-    try:
-        hash(setting)
-    except TypeError:
-        return None
-    return setting
-
-
-def remembered(size: int = 64) -> Callable:
-    """Decorator: ``function(values, *arguments)`` (hashable arguments) computed once per setting of
-    the parameter values it reads and of its arguments (``Memo``)."""
-    def decorate(function: Callable[..., Result]) -> Callable[..., Result]:
-        memo = Memo(size)
-
-        def wrapper(values: dict, *arguments) -> Result:
-            return memo.call(arguments, values, lambda read: function(read, *arguments))
-        wrapper.__doc__, wrapper.__name__, wrapper.__wrapped__ = function.__doc__, function.__name__, function
-        wrapper.memo = memo
-        return wrapper
-    return decorate
-
-
 def claim_run(exercise: Exercise, claim: Claim, overrides: dict | None = None) -> tuple:
     """The headless run a claim is measured on: (exercise, settings, duration).  Claims
     with the same key share one ``metrics`` call."""
@@ -459,6 +327,7 @@ MODULES = (
     "ekf_disturbance",
     "lqg_vs_pid",
     "sensor_placement",
+    "rotor_at_speed",
     "maglev_tracking",
     "maglev_tuning",
     "thrust_liftoff",

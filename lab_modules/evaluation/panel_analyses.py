@@ -1,6 +1,6 @@
 """What each panel of a tab computes, remembered for all tabs of the process: the results of
 ``Exercise.analyse_panel`` and the margins of ``Exercise.open_loops``, each per exercise, panel
-and setting of the parameter values it read (``lab_modules.exercises.Memo``).  A class that
+and setting of the parameter values it read (``lab_modules.memo.Memo``).  A class that
 opens an exercise at its defaults computes each panel once; a slider an analysis never reads
 does not make it run again."""
 
@@ -8,8 +8,9 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 
-from app.panels import margins
-from lab_modules.exercises import Analysis, Exercise, Memo, ReadValues, results
+from lab_modules.evaluation import margins
+from lab_modules.exercises import Analysis, Exercise, results
+from lab_modules.memo import Memo, ReadValues
 
 PANEL_RESULTS = Memo(size=256)
 MARGIN_RESULTS = Memo(size=128)
@@ -35,12 +36,12 @@ def _remembered(key, values: dict, read: ReadValues, found: Iterator[Analysis]) 
         PANEL_RESULTS.keep(key, values, read.read, last)
 
 
-def margin_results(exercise: Exercise, values: dict) -> tuple[list, list, list]:
-    """The readouts, plots and notes of the exercise's open loops (``app.panels.margins``)."""
+def margin_results(exercise: Exercise, values: dict) -> margins.MarginView:
+    """The readouts, plots and notes of the exercise's open loops (``lab_modules.evaluation.margins``)."""
     return MARGIN_RESULTS.call((exercise.name,), values, lambda read: margins.margin_view(exercise, read))
 
 
-def remembered_margins(exercise: Exercise, values: dict) -> tuple[list, list, list] | None:
+def remembered_margins(exercise: Exercise, values: dict) -> margins.MarginView | None:
     """The margins if they are remembered for ``values`` (None: computing them takes a while)."""
     found = MARGIN_RESULTS.find((exercise.name,), values)
     return None if found is None else found[0]
