@@ -23,6 +23,7 @@ from lab_modules.exercises import (
     sensor_placement,
 )
 from lab_modules.memo import Memo, ReadValues, remembered
+from lab_modules.parameters import in_si
 from tests.example_exercise import contract_exercises
 from tests.wsclient import RawTab, lab_process, run_async
 
@@ -106,6 +107,19 @@ def test_nested_memos_mark_what_the_inner_one_read():
     assert outer.call("k", {"a": 1, "b": 3}, compute) == 2 and len(read) == 1 and read[0] == {"a"}
     assert inner({"a": 1, "b": 4}) == 1                                    # now remembered: marks it too
     assert outer.call("k", {"a": 2, "b": 3}, compute) == 3 and read[-1] == {"a"}
+
+
+def test_si_values_read_a_control_only_when_it_is_asked_for():
+    """A computation that converts through ``in_si`` depends on the controls it converts, not on
+    every numeric control of its exercise."""
+    exercise = get("kalman_noise")
+    read = ReadValues(exercise.resolve({}))
+    si = in_si(kalman_noise.PARAMETERS, read)
+    assert not read.read
+    assert si["sensor_lag_us"] == read.raw()["sensor_lag_us"] * 1e-6
+    assert read.read == {"sensor_lag_us"}
+    with pytest.raises(KeyError):
+        si["feedback"]                            # a choice among words has no SI value
 
 
 def test_values_that_cannot_be_hashed_are_not_remembered():
