@@ -28,7 +28,7 @@ from tests.example_exercise import contract_exercises
 from tests.wsclient import RawTab, lab_process, run_async
 
 EXERCISES = contract_exercises()
-SPLIT = ("kalman_noise", "stiffness_map", "adaptive_filter", "thrust_liftoff", "lqg_vs_pid")
+SPLIT = ("kalman_noise", "stiffness_map", "adaptive_filter", "thrust_liftoff", "lqg_vs_pid", "rotor_at_speed")
 
 
 def _last(result) -> Analysis:
@@ -131,7 +131,7 @@ def test_values_that_cannot_be_hashed_are_not_remembered():
 
 @pytest.mark.parametrize("name, panel", [("kalman_noise", SCOPE), ("kalman_noise", POLE_MAP),
                                          ("adaptive_filter", SCOPE), ("thrust_liftoff", SCOPE),
-                                         ("lqg_vs_pid", POLE_MAP)])
+                                         ("lqg_vs_pid", POLE_MAP), ("rotor_at_speed", POLE_MAP)])
 def test_a_control_a_panel_never_reads_leaves_it_unchanged(name, panel):
     """What ``ReadValues`` finds is all a panel depends on: moving any other control changes nothing."""
     exercise = get(name)
