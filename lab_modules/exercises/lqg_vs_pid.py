@@ -79,7 +79,13 @@ from lab_modules.exercises._lqg_vs_pid_fronts import (
     pareto,
     stiffness_at,
 )
-from lab_modules.exercises._lqg_vs_pid_steps import step_plots, step_tests_at
+from lab_modules.exercises._lqg_vs_pid_steps import (
+    scaled,
+    step_and_loop_figures,
+    step_plots,
+    step_readouts,
+    step_tests_at,
+)
 from lab_modules.exercises._radial_axis_controls import (
     FILTER_R_CURRENT,
     FILTER_R_POSITION,
@@ -99,7 +105,6 @@ from lab_modules.loops.radial_axis_step_tests import (
     largest_disturbance_step,
     loop_figures,
 )
-from lab_modules.memo import remembered
 from lab_modules.parameters import Parameter
 from lab_modules.plants.radial_bearing import RIG
 from lab_modules.scenes.bearing import ESTIMATE_RED, TRUE_BLUE, BearingScene, Ghost
@@ -233,13 +238,6 @@ CLAIMS = (
 
 # -- the exercise --------------------------------------------------------------------
 
-@remembered()
-def step_and_loop_figures(values: dict) -> tuple[dict, dict]:
-    """Both loops' step tests (``step_tests_at``) and linear figures (``loop_figures``)."""
-    loops = setups(values)
-    return step_tests_at(values, loops), {name: loop_figures(axis) for name, axis in loops.items()}
-
-
 class LqgVsPid(Exercise):
     name = "lqg_vs_pid"
     title = "LQG regulator against the optimal PID"
@@ -324,26 +322,7 @@ class LqgVsPid(Exercise):
         loops, lqg = setups(values), regulator(values)
         tests, linear = step_and_loop_figures(values)
         poles = pole_sets(loops, lqg)
-        readouts = []
-        for name in LOOPS:
-            # a figure the step test could not measure is a word: the rotor touched down (or never settled)
-            word = "touched down" if tests[name]["stops"] else "not reached"
-            r = {key: (word if isinstance(value, float) and not np.isfinite(value) else value)
-                 for key, value in tests[name].items()}
-            f = linear[name]
-            readouts += [
-                (f"{name}: overshoot, reference step", r["reference_overshoot_percent"], "%"),
-                (f"{name}: settling time (±2 %)", _scaled(r["reference_settling_time_s"], 1e3), "ms"),
-                (f"{name}: peak control current, reference step", r["reference_peak_current_a"], "A"),
-                (f"{name}: RMS control current, reference step", r["reference_rms_current_a"], "A"),
-                (f"{name}: step stiffness Δf/x_max (linear)", f["step_stiffness_n_per_m"] * 1e-6, "N/µm"),
-                (f"{name}: min dynamic stiffness (linear, worst frequency)", f["min_dynamic_stiffness_n_per_m"] * 1e-6, "N/µm"),
-                (f"{name}: frequency of the min dynamic stiffness", f["min_dynamic_stiffness_frequency_hz"], "Hz"),
-                (f"{name}: largest deviation, disturbance step", _scaled(r["disturbance_max_deviation_m"], 1e6), "µm"),
-                (f"{name}: s_dyn of the time run (chosen plant)",
-                 _scaled(r["disturbance_dynamic_stiffness_n_per_m"], 1e-6), "N/µm"),
-                (f"{name}: offset 150 ms after the disturbance step", _scaled(r["disturbance_final_offset_m"], 1e6), "µm"),
-            ]
+        readouts = step_readouts(tests, linear)
         ratio = dominant_pole_ratio(poles)
         readouts += [
             ("Dominant pole, LQG regulator (Re)", dominant_real_part(poles["LQG regulator"]), "rad/s"),
@@ -455,11 +434,11 @@ class LqgVsPid(Exercise):
                 f"min_dynamic_stiffness_{key}_n_per_um": f["min_dynamic_stiffness_n_per_m"] * 1e-6,
                 f"min_dynamic_stiffness_frequency_{key}_hz": f["min_dynamic_stiffness_frequency_hz"],
                 f"noise_rms_current_linear_{key}_a": f["noise_rms_current_a"],
-                f"dynamic_stiffness_{key}_n_per_um": _scaled(r["disturbance_dynamic_stiffness_n_per_m"], 1e-6),
-                f"max_deviation_{key}_um": _scaled(r["disturbance_max_deviation_m"], 1e6),
-                f"offset_after_disturbance_{key}_um": _scaled(r["disturbance_final_offset_m"], 1e6),
+                f"dynamic_stiffness_{key}_n_per_um": scaled(r["disturbance_dynamic_stiffness_n_per_m"], 1e-6),
+                f"max_deviation_{key}_um": scaled(r["disturbance_max_deviation_m"], 1e6),
+                f"offset_after_disturbance_{key}_um": scaled(r["disturbance_final_offset_m"], 1e6),
                 f"overshoot_{key}_percent": r["reference_overshoot_percent"],
-                f"settling_time_{key}_ms": _scaled(r["reference_settling_time_s"], 1e3),
+                f"settling_time_{key}_ms": scaled(r["reference_settling_time_s"], 1e3),
                 f"peak_current_{key}_a": r["reference_peak_current_a"],
                 f"rms_current_{key}_a": r["reference_rms_current_a"],
                 f"peak_current_disturbance_{key}_a": r["disturbance_peak_current_a"],
@@ -503,11 +482,6 @@ class LqgVsPid(Exercise):
         })
         return {key: None if isinstance(value, float) and not np.isfinite(value) else value
                 for key, value in metrics.items()}
-
-
-def _scaled(value, factor: float):
-    """A readout value in display units, or the word that stands for it."""
-    return value if isinstance(value, str) else value * factor
 
 
 def rms(samples: np.ndarray) -> float:
