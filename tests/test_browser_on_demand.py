@@ -45,3 +45,22 @@ def test_the_analysis_tab_is_computed_when_shown_and_not_while_hidden(open_tab):
     assert page.evaluate(ANALYSIS_TABLE_JS) != shown, "the Analysis tab did not follow the new gain"
     assert page.get_by_role("button", name=re.compile("panel (shown|hidden)")).count() == 0
     assert not tab.errors, tab.errors
+
+
+def test_analysis_charts_that_become_other_plots_while_shown_draw_without_errors(open_tab):
+    """rotor_at_speed's Analysis tab, watched while it is computed: its quick result's two plots,
+    then the margins' three, then the full result's eight, so charts change from one plot to
+    another in view (uPlot threw 'Invalid array length' when a shown chart took another plot's
+    series and data)."""
+    tab = open_tab()
+    page = tab.page
+    page.get_by_role("heading", name=get("kalman_noise").title).wait_for(timeout=60000)
+    tab.switch_exercise(get("rotor_at_speed").title, 90000)
+    page.get_by_text("Closed loop stable at this speed").first.wait_for(timeout=60000)
+    tab.open_panel_tab("Analysis")
+    titles = page.locator(".u-title:visible")
+    titles.filter(has_text="Stability limit against speed").first.wait_for(timeout=120000)
+    page.get_by_text("Sensitivity |S|").first.wait_for(timeout=60000)
+    shown = titles.all_inner_texts()
+    assert len(shown) == 8 and shown[3].startswith("Stability limit against speed"), shown
+    assert not tab.errors, tab.errors
