@@ -12,6 +12,20 @@ def send_data(handle, data: tuple) -> None:
     handle._queue_update("data", data)
 
 
+def gui_input_handle(server, client_id: int | None, uuid: str):
+    """The handle of the control a client's GUI update addresses (its own or a shared one), or None."""
+    client = server._connected_clients.get(client_id)
+    return getattr(client, "gui", server.gui)._gui_input_handle_from_uuid.get(uuid)
+
+
+def forget_upload(server, client_id: int | None, transfer: str) -> None:
+    """Drop the parts viser buffers of an unfinished upload (it keeps them until the last part)."""
+    client = server._connected_clients.get(client_id)
+    for gui in (server.gui, getattr(client, "gui", None)):
+        if gui is not None:
+            gui._current_file_upload_states.pop(transfer, None)
+
+
 # -- which panel tab the browser shows ------------------------------------------------------------
 #: Labels of a panel tab's two hidden beacon buttons (``visibility_beacon``), followed by the tab's name.
 SHOWN_LABEL, HIDDEN_LABEL = "panel shown:", "panel hidden:"

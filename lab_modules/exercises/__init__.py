@@ -152,6 +152,10 @@ class Simulation(Protocol):
     # ((label, SI unit), ...), ``x`` (n,), ``P`` (n, n), ``measurements`` ((label, unit), ...),
     # ``K`` (n, m), ``innovation`` (m,) and ``innovation_sigma`` (m,) = √diag(S) against the
     # prior (K and the innovation None for a filter that corrects continuously).
+    # ``filter_tape() -> estimators.filter_history.FilterTape``: for a linear filter, the bounded
+    # record of what it read (its matrices, the prior at the start, per sample u, y and the true
+    # state): the app's filter debugger replays its history from it (step back, branch with another
+    # Q or R, covariance ellipses, NEES/NIS), and ``python -m app run --filter-history`` prints it.
 
 
 class SceneView(Protocol):
@@ -181,6 +185,9 @@ class Exercise:
     parameters: tuple[Parameter, ...]
     charts: tuple[Chart, ...]
     default_duration_s: float = 1.0
+    #: The shortest headless run whose metrics are all defined at the defaults [s] (e.g. one that
+    #: reaches the step its metrics measure); ``run --duration`` refuses less.
+    min_duration_s: float = 0.01
     data_description: str | None = None   # set: the exercise accepts an uploaded CSV
     download_label: str | None = None     # set: a button offers ``download(values)`` as a file
     claims: tuple[Claim, ...] = ()        # the paper's headline results, measured by ``metrics``

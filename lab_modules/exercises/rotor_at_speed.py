@@ -516,22 +516,23 @@ def at_set_speed(values: dict) -> Analysis:
     bearing_here = abs(response_here[LOOP_OUTPUTS.index("r_bearing_m")])
     offset = values["sensor_offset_mm"]
     readouts = [("Speed n", speed, "rpm"), ("Spin frequency n / 60", speed / 60, "Hz"),
-                ("Sensor", sensor_name(offset), ""),
-                ("Closed loop stable at this speed", "yes" if at_speed.stable[0] else "no", "")]
-    for j in range(min(n, 4)):
+                ("Closed loop at this speed", "stable" if at_speed.stable[0] else "unstable", "")]
+    for j in range(min(n, 3)):
         for d, direction in ((0, "backward"), (1, "forward")):
-            readouts.append((f"Mode {j + 1} {direction}: frequency, damping",
-                             f"{at_speed.whirl_hz[0, j, d]:.1f} Hz, {100 * at_speed.damping[0, j, d]:.2f} %", ""))
-    for j in range(1, min(n, 4)):
-        readouts.append((f"Rotor on its ball bearing, mode {j + 1}: backward / forward",
-                         f"{-free[j, 0]:.1f} / {free[j, 1]:.1f} Hz at {CAMPBELL_SPEEDS_RPM[here]:.0f} rpm", ""))
+            readouts += [(f"Mode {j + 1} {direction} whirl: frequency", at_speed.whirl_hz[0, j, d], "Hz"),
+                         (f"Mode {j + 1} {direction} whirl: damping ratio", 100 * at_speed.damping[0, j, d], "%")]
+    for j in range(1, min(n, 3)):
+        for d, direction in ((0, "backward"), (1, "forward")):
+            label = f"Rotor on its ball bearing at {CAMPBELL_SPEEDS_RPM[here]:.0f} rpm, mode {j + 1} {direction} whirl"
+            readouts.append((label, (-1, 1)[d] * free[j, d], "Hz"))
     readouts += [
         (f"Unbalance U ({values['balance_grade']})", unbalance_kg_m(values) * 1e6, "g·mm"),
         ("Unbalance force at this speed", unbalance_kg_m(values) * float(np.pi * speed / 30) ** 2, "N"),
         ("Unbalance orbit at the bearing, this speed", bearing_here * 1e6, "µm"),
         ("Unbalance orbit at the sensor, this speed", abs(response_here[LOOP_OUTPUTS.index("r_sensor_m")]) * 1e6, "µm"),
         ("Unbalance control current amplitude, this speed", abs(response_here[LOOP_OUTPUTS.index("current_a")]), "A"),
-        ("ISO 14839-2 zone at this speed", iso_14839_2_zone(bearing_here, in_si(PARAMETERS, values)["clearance_um"]), ""),
+        ("ISO 14839-2 at this speed",
+         f"zone {iso_14839_2_zone(bearing_here, in_si(PARAMETERS, values)['clearance_um'])}", ""),
     ]
     notes = [(f"Sensor: {sensor_name(offset)} at {offset:+.0f} mm from the bearing plane; feedback: "
               f"{values['feedback']} position. Complex coordinates r = x + i y: a pole with Im s > 0 whirls "
@@ -560,29 +561,31 @@ def over_speed(values: dict):
     peak = int(np.argmax(np.abs(response[:, LOOP_OUTPUTS.index("r_bearing_m")])))
     peak_m = abs(response[peak, LOOP_OUTPUTS.index("r_bearing_m")])
     midspan = midspan_orbit_m(values, closed)
-    readouts = [("Critical speeds (forward whirl = 1×)", ", ".join(f"{c:.0f}" for c in criticals)
-                 or "none below 12,000", "rpm"),
-                ("Peak unbalance orbit at the bearing, 0-12,000 rpm",
-                 (f"{peak_m * 1e6:.1f} µm at {CAMPBELL_SPEEDS_RPM[peak]:.0f} rpm "
-                  f"(zone {iso_14839_2_zone(peak_m, clearance)})"), ""),
-                (f"Peak unbalance orbit at mid-span (z = {MIDSPAN_M * 1e3:.0f} mm)",
-                 f"{np.max(midspan) * 1e6:.1f} µm at {CAMPBELL_SPEEDS_RPM[np.argmax(midspan)]:.0f} rpm", "")]
+    readouts = ([(f"Critical speed {k + 1} (forward whirl meets 1× spin)", c, "rpm") for k, c in enumerate(criticals)]
+                or [("Critical speeds below 12,000 rpm", "none", "")])
+    readouts += [("Peak unbalance orbit at the bearing, 0-12,000 rpm", peak_m * 1e6, "µm"),
+                 ("Speed of that peak", CAMPBELL_SPEEDS_RPM[peak], "rpm"),
+                 ("ISO 14839-2 at that peak", f"zone {iso_14839_2_zone(peak_m, clearance)}", ""),
+                 (f"Peak unbalance orbit at mid-span, {MIDSPAN_M * 1e3:.0f} mm along the shaft", np.max(midspan) * 1e6,
+                  "µm"),
+                 ("Speed of the mid-span peak", CAMPBELL_SPEEDS_RPM[np.argmax(midspan)], "rpm")]
     plots = [campbell_plot(values, free, swept, criticals)]
     yield Analysis(readouts + [("Stability limits against speed", "computing …", "")], {}, [],
                    plots + [unbalance_plot(values, response, midspan)])
     sensors = {name: sweep(loop(values, sensor_offset_mm=o)) if o != offset else swept for name, o in SENSORS.items()}
     limits = {name: largest_stable_gain(values, o) for name, o in SENSORS.items()}
+    notes = []
     for name, o in SENSORS.items():
         changes = stability_changes_rpm(values, o, sensors[name].stable)
         verdict = ("stable over the whole range" if sensors[name].stable.all() else
                    "unstable over the whole range" if not sensors[name].stable.any() else
                    "; ".join(f"{what} stability at {rpm:.0f} rpm" for rpm, what in changes))
-        readouts.append((f"{name.capitalize()}: at these gains", verdict, ""))
+        notes.append(f"{name.capitalize()} sensor at these gains: {verdict}.")
         readouts.append((f"{name.capitalize()}: largest stable gain factor, lowest over speed",
                          float(np.min(limits[name])), "×"))
     plots += [damping_plot(name, sensors[name]) for name in SENSORS]
     plots += [limit_plot(limits), unbalance_plot(values, response, midspan)]
-    yield Analysis(readouts, {}, [], plots)
+    yield Analysis(readouts, {}, notes, plots)
 
 
 def at_speed_poles(values: dict) -> np.ndarray:
