@@ -56,7 +56,7 @@ def test_analysis_charts_that_become_other_plots_while_shown_draw_without_errors
     page = tab.page
     page.get_by_role("heading", name=get("kalman_noise").title).wait_for(timeout=60000)
     tab.switch_exercise(get("rotor_at_speed").title, 90000)
-    page.get_by_text("Closed loop stable at this speed").first.wait_for(timeout=60000)
+    page.get_by_text("Closed loop at this speed").first.wait_for(timeout=60000)
     tab.open_panel_tab("Analysis")
     titles = page.locator(".u-title:visible")
     titles.filter(has_text="Stability limit against speed").first.wait_for(timeout=120000)
