@@ -115,7 +115,7 @@ def map_test_rmse(pair: TrainedPair, values: dict) -> dict[str, dict[str, float]
     ki_true, ks_true = lsm_factors(currents, positions, **lsm_kwargs(values))
     ki_table, ks_table = identified_tables(values)
     out = {}
-    for name, network, table, truth, unit in (("k_i", pair.ki, ki_table, ki_true, 1.0),   # unit: per N/… shown
+    for name, network, table, truth, unit in (("k_i", pair.ki, ki_table, ki_true, 1.0),
                                               ("k_s", pair.ks, ks_table, ks_true, N_PER_MM)):
         bilinear = RegularGridInterpolator((GRID_POSITIONS_M, GRID_CURRENTS_A), table)   # rows x, columns i
         table_error = bilinear(np.column_stack([positions, currents])) * unit - truth     # tables in N/mm
