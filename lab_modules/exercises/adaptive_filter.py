@@ -324,7 +324,7 @@ def drift_metrics(values: dict) -> dict:
             "consistency": tests, "map_test_rmse": rmse, "status": found["status"]}
 
 
-NIS_BOUNDS = tuple(round(b, 3) for b in bounds(round(0.1 / T), 1))          # 95 % bounds of a 100 ms window's mean NIS (1000 samples)
+NIS_BOUNDS = tuple(round(b, 3) for b in bounds(round(0.1 / T), 1))   # 95 %, a 100 ms window (1000 samples)
 DRIFT = "lab target (paper 002 Figs. 1, 8 online; the paper gives no number)"
 CLAIMS = (*CLAIMS,
     Claim(DRIFT, "k_Magnet −10 % at 200 ms (point 1): time until the adaptive filter's F̂_St bias is under 10 % "
