@@ -157,10 +157,10 @@ class TrainedPair:
 
 def stiffness_networks(ki_table: np.ndarray, ks_table: np.ndarray, ki_train: np.ndarray, ks_train: np.ndarray,
                        epochs: int, rate: float, initial_width: float = INITIAL_WIDTH,
-                       train_weights: bool = False) -> TrainedPair:
-    """Networks from the node tables, widths trained on the LSM factors ``*_train``
-    of ``training_grid()`` (``epochs`` steps of steepest descent)."""
-    currents, positions = training_grid()
+                       train_weights: bool = False, inputs: tuple | None = None) -> TrainedPair:
+    """Networks from the node tables, widths trained on the LSM factors ``*_train`` at the operating
+    points ``inputs`` (i [A], x [m]); None: ``training_grid()`` (``epochs`` steps of steepest descent)."""
+    currents, positions = training_grid() if inputs is None else inputs
     ki = FuzzyBasisNetwork.from_table(ki_table, initial_width)
     ks = FuzzyBasisNetwork.from_table(ks_table, initial_width)
     before = (ki.copy(), ks.copy())

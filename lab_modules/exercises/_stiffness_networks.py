@@ -11,16 +11,18 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
+from scipy.interpolate import RegularGridInterpolator
 
 from lab_modules.estimators.fuzzy_basis_network import (
     INITIAL_WIDTH,
     TrainedPair,
     stiffness_networks,
+    test_grid,
     training_grid,
 )
 from lab_modules.estimators.stiffness_identification import lsm_factors, lsm_tables
 from lab_modules.parameters import Parameter, in_si
-from lab_modules.plants.axial_bearing import N_PER_MM
+from lab_modules.plants.axial_bearing import GRID_CURRENTS_A, GRID_POSITIONS_M, N_PER_MM
 
 P = Parameter
 FBFNN_EPOCHS = P("fbfnn_epochs", "FBFNN training epochs", "", 1000, 0, 5000,
@@ -70,22 +72,56 @@ def identified_tables(values: dict) -> tuple[np.ndarray, np.ndarray]:
     return ki, ks / N_PER_MM
 
 
+#: What the widths are trained on: the LSM factors of the 20×20 grid (between the nodes too), or the
+#: paper's 25 nodes alone (Tables 4-5).
+TRAINING_DATA = ("20×20 grid", "25 nodes")
+FBFNN_TRAINING = P("fbfnn_training", "FBFNN training data", "", TRAINING_DATA[0], choices=TRAINING_DATA,
+                   description="The operating points whose LSM factors train the rule widths: a 20×20 grid "
+                               "(between the nodes too) or the paper's 25 nodes.", group="FBFNN")
+
+
 def network_key(values: dict) -> tuple:
     """The settings the trained networks depend on."""
     return (values["stencil_current_ma"], values["stencil_position_um"], values["fit"], values["force_noise_n"],
             int(values["seed"]), int(values["fbfnn_epochs"]), values["fbfnn_rate"], values["fbfnn_initial_width"],
-            values["fbfnn_train_weights"])
+            values["fbfnn_train_weights"], values.get("fbfnn_training", TRAINING_DATA[0]))
+
+
+def node_points() -> tuple[np.ndarray, np.ndarray]:
+    """The 25 nodes (i [A], x [m]) in the tables' order (rows x, columns i)."""
+    currents, positions = np.meshgrid(GRID_CURRENTS_A, GRID_POSITIONS_M, indexing="xy")
+    return currents.ravel(), positions.ravel()
 
 
 @lru_cache(maxsize=16)
 def _networks(key: tuple) -> TrainedPair:
-    stencil_ma, stencil_um, fit, noise, seed, epochs, rate, width, train_weights = key
+    stencil_ma, stencil_um, fit, noise, seed, epochs, rate, width, train_weights, training = key
     values = {"stencil_current_ma": stencil_ma, "stencil_position_um": stencil_um, "fit": fit,
               "force_noise_n": noise, "seed": seed}
     ki, ks_mm = identified_tables(values)
-    train_i, train_x = training_grid()
-    ki_train, ks_train = lsm_factors(train_i, train_x, **lsm_kwargs(values))
-    return stiffness_networks(ki, ks_mm * N_PER_MM, ki_train, ks_train, epochs, rate, width, train_weights == "on")
+    if training == TRAINING_DATA[1]:           # the nodes: their (noisy) table values are the targets
+        inputs, ki_train, ks_train = node_points(), ki.ravel(), ks_mm.ravel() * N_PER_MM
+    else:
+        inputs = training_grid()
+        ki_train, ks_train = lsm_factors(*inputs, **lsm_kwargs(values))
+    return stiffness_networks(ki, ks_mm * N_PER_MM, ki_train, ks_train, epochs, rate, width, train_weights == "on",
+                              inputs)
+
+
+def map_test_rmse(pair: TrainedPair, values: dict) -> dict[str, dict[str, float]]:
+    """Test RMSE on the 41×41 grid against the exact LSM factors, k_i [N/A] and k_s [N/mm]: the trained
+    networks and a bilinear table of the 25 nodes (the interpolation a table-lookup filter would use)."""
+    currents, positions = test_grid()
+    ki_true, ks_true = lsm_factors(currents, positions, **lsm_kwargs(values))
+    ki_table, ks_table = identified_tables(values)
+    out = {}
+    for name, network, table, truth, unit in (("k_i", pair.ki, ki_table, ki_true, 1.0),
+                                              ("k_s", pair.ks, ks_table, ks_true, N_PER_MM)):
+        bilinear = RegularGridInterpolator((GRID_POSITIONS_M, GRID_CURRENTS_A), table)   # rows x, columns i
+        table_error = bilinear(np.column_stack([positions, currents])) * unit - truth     # tables in N/mm
+        out[name] = {"fbfnn": network.rmse(currents, positions, truth) / unit,
+                     "bilinear": float(np.sqrt(np.mean(table_error**2))) / unit}
+    return out
 
 
 def networks(values: dict) -> TrainedPair:

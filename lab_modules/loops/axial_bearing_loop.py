@@ -23,8 +23,7 @@ The SISO ADALINE (eq. 24) identifies k_Magnet from (i, measured x) and a measure
 magnet force with white noise of σ_F (lab choice: the paper's target is the
 MISO ADALINE's force estimate).
 
-The kernel takes named bundles: ``Schedule``, ``AxialPID``, ``FilterBank`` and
-``Identification``.
+The kernel takes named bundles: ``Schedule``, ``AxialPID``, ``FilterBank``, ``Identification``.
 """
 
 from __future__ import annotations
@@ -203,7 +202,7 @@ class Identification(NamedTuple):
 
 
 class AxialRig(NamedTuple):
-    """The rig's constants the plant's rates need (``_derivatives``)."""
+    """The rig's constants the plant's rates need (``plant_rates``)."""
 
     mass_kg: float                # rotor mass m [kg]
     gravity_m_per_s2: float       # g [m/s²]
@@ -214,10 +213,24 @@ class AxialRig(NamedTuple):
 
 
 @njit(cache=True, nogil=True)
-def _derivatives(x, v, xm, current, load, k_magnet, rig):
+def plant_rates(x, v, xm, current, load, k_magnet, rig):
     """Rates of x [m], v [m/s] and the sensor output x_M [V] (eq. 1-2, 18) for the plant's k_Magnet."""
     accel = (magnet_force(current, x, k_magnet, rig.gap_m, rig.bias_current_a) + load) / rig.mass_kg - rig.gravity_m_per_s2
     return v, accel, (rig.sensor_gain_v_per_m * x - xm) / rig.sensor_lag_s
+
+
+@njit(cache=True, nogil=True)
+def plant_sample(x, v, xm, current, load, k_magnet, rig, sample_time_s):
+    """(x [m], v [m/s], x_M [V]) one sample later: RK4 in ``RK4_SUBSTEPS`` sub-steps, current and load held."""
+    h = sample_time_s / RK4_SUBSTEPS
+    for _ in range(RK4_SUBSTEPS):
+        d1 = plant_rates(x, v, xm, current, load, k_magnet, rig)
+        d2 = plant_rates(x + 0.5 * h * d1[0], v + 0.5 * h * d1[1], xm + 0.5 * h * d1[2], current, load, k_magnet, rig)
+        d3 = plant_rates(x + 0.5 * h * d2[0], v + 0.5 * h * d2[1], xm + 0.5 * h * d2[2], current, load, k_magnet, rig)
+        d4 = plant_rates(x + h * d3[0], v + h * d3[1], xm + h * d3[2], current, load, k_magnet, rig)
+        x, v, xm = (x + h / 6 * (d1[0] + 2 * d2[0] + 2 * d3[0] + d4[0]),
+                     v + h / 6 * (d1[1] + 2 * d2[1] + 2 * d3[1] + d4[1]), xm + h / 6 * (d1[2] + 2 * d2[2] + 2 * d3[2] + d4[2]))
+    return x, v, xm
 
 
 @njit(cache=True, nogil=True)
@@ -252,7 +265,6 @@ def run(n_steps, state, physics, schedule, pid, filters, identification, noise, 
     process_noise(physics, B_fixed, Q_fixed)
     kp, ti, kd = pid.proportional_a_per_m, pid.integral_time_s, pid.derivative_a_s_per_m
     tf, tr, i_ff, feedback = pid.derivative_filter_s, pid.reference_filter_s, pid.feedforward_a, pid.feedback
-    h = T / RK4_SUBSTEPS
     for k in range(n_steps):
         if state[S_STOPPED] > 0:
             return k
@@ -348,21 +360,9 @@ def run(n_steps, state, physics, schedule, pid, filters, identification, noise, 
         predict_linear(filter_z[2], filter_P[2], A, B, Q, command)
         # 3 EKF, force law eq. 1
         predict_exact_force(filter_z[3], filter_P[3], physics, command, A, B, Q)
-        row[29] = state[S_ADALINE]
-        row[30] = k_magnet * 1e6
-        row[31], row[32] = v, command
+        row[29], row[30], row[31], row[32] = state[S_ADALINE], k_magnet * 1e6, v, command
         # plant: RK4 over the sample, current held
-        for _ in range(RK4_SUBSTEPS):
-            d1 = _derivatives(x, v, xm, current, load, k_magnet, rig)
-            d2 = _derivatives(x + 0.5 * h * d1[0], v + 0.5 * h * d1[1], xm + 0.5 * h * d1[2], current, load,
-                              k_magnet, rig)
-            d3 = _derivatives(x + 0.5 * h * d2[0], v + 0.5 * h * d2[1], xm + 0.5 * h * d2[2], current, load,
-                              k_magnet, rig)
-            d4 = _derivatives(x + h * d3[0], v + h * d3[1], xm + h * d3[2], current, load,
-                              k_magnet, rig)
-            x += h / 6 * (d1[0] + 2 * d2[0] + 2 * d3[0] + d4[0])
-            v += h / 6 * (d1[1] + 2 * d2[1] + 2 * d3[1] + d4[1])
-            xm += h / 6 * (d1[2] + 2 * d2[2] + 2 * d3[2] + d4[2])
+        x, v, xm = plant_sample(x, v, xm, current, load, k_magnet, rig, T)
         state[S_X], state[S_V], state[S_XM] = x, v, xm
         state[S_CURRENT] = current
         state[S_T] = t + T
