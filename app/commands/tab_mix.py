@@ -52,10 +52,18 @@ def mix_move(exercise_name: str) -> SliderMove:
         *_, last = results(exercise.analyse_panel(read, SCOPE))
         return last.readouts, read.read
 
-    def runs(at: dict) -> bool:
-        simulation = exercise.simulation(at)
-        simulation.advance(round(MIX_RUN_S / simulation.sample_time_s))
-        return not simulation.status_message()
+    def runs(pair: list[dict]) -> bool:
+        """Whether a run keeps going through a move there and back, as the tab makes it (a move
+        retunes the running simulation: a fresh run at each value may hold where a retuned one
+        touches down)."""
+        simulation = exercise.simulation(pair[0])
+        for k, at in enumerate((pair[0], pair[1], pair[0])):
+            if k:
+                simulation = exercise.retune(simulation, at)
+            simulation.advance(round(MIX_RUN_S / simulation.sample_time_s))
+            if simulation.status_message():
+                return False
+        return True
     _, read = scope_readouts(values)
     for parameter in exercise.parameters:
         if parameter.choices or parameter.log or parameter.integer or parameter.name not in read:
@@ -64,7 +72,7 @@ def mix_move(exercise_name: str) -> SliderMove:
         for start in (float(parameter.default), 0.5 * (low + high)):
             moved = float(f"{min(max(1.1 * start if start else low + 0.02 * (high - low), low), high):.4g}")
             pair = [{**values, parameter.name: value} for value in (start, moved)]
-            if not all(runs(at) for at in pair):
+            if not runs(pair):
                 continue
             (before, _), (after, _) = (scope_readouts(at) for at in pair)
             changed = next((label for (label, a, _), (_, b, _) in zip(before, after) if a != b), None)
