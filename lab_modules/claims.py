@@ -115,15 +115,17 @@ def _cell(text: str) -> str:
     return _plain(text).replace("|", "\\|").replace("\n", " ")
 
 
-def markdown_table(claims: tuple[Claim, ...], values: list[float | None] | None = None) -> str:
+def markdown_table(claims: tuple[Claim, ...], values: list[float | None] | None = None,
+                   parameters: tuple = ()) -> str:
     """The paper-vs-lab table of a worksheet: one row per claim with the lab's
     value (``…`` where ``values`` is None or has None: still being measured),
-    then the claims' notes (how it is measured; a deviation's reason) as a list."""
+    then the claims' notes (how it is measured; a deviation's reason) as a list.
+    A claim's settings are named as the controls label them (``parameters``)."""
     values = values if values is not None else [None] * len(claims)
     rows = ["| source | claim | paper | lab | accepted | status |", "|---|---|---|---|---|---|"]
     for claim, value in zip(claims, values):
         lab = format_value(value) + (f" {claim.unit}" if value is not None and claim.unit else "")
-        quantity = claim.quantity + (f" (at {settings_text(claim.settings)})" if claim.settings else "")
+        quantity = claim.quantity + (f" (with {settings_text(claim.settings, parameters)})" if claim.settings else "")
         rows.append("| " + " | ".join(_cell(text) for text in (
             claim.source, quantity, claim.paper, lab, claim.accept_text(), status(claim, value))) + " |")
     notes = [f"- *{_plain(claim.quantity)}*{' (deviation)' if claim.deviation else ''}: {_plain(claim.note)}"
@@ -131,9 +133,19 @@ def markdown_table(claims: tuple[Claim, ...], values: list[float | None] | None 
     return "\n".join(rows + ([""] + notes if notes else []))
 
 
-def settings_text(settings: dict) -> str:
-    """Parameter overrides as ``name = value, ...``."""
-    return ", ".join(f"{name} = {value}" for name, value in settings.items())
+def settings_text(settings: dict, parameters: tuple = ()) -> str:
+    """Parameter overrides as ``name = value, ...``; a parameter among ``parameters`` (``Parameter``)
+    as its control is labelled, with its unit ("Current noise σ(i) = 0 mA")."""
+    labelled = {parameter.name: parameter for parameter in parameters}
+
+    def one(name: str, value) -> str:
+        parameter = labelled.get(name)
+        if parameter is None:
+            return f"{name} = {value}"
+        unit = f" {parameter.unit}" if parameter.unit and not isinstance(value, str) else ""
+        return f"{parameter.label} = {value:g}{unit}" if isinstance(value, (int, float)) \
+            else f"{parameter.label} = {value}"
+    return ", ".join(one(name, value) for name, value in settings.items())
 
 
 def render_worksheet(text: str, table: str) -> str:

@@ -90,11 +90,15 @@ def normalise_code(text: str) -> str:
     if "-" not in cleaned and len(cleaned) == 2 + CODE_RANDOM_CHARS:
         cleaned = f"{cleaned[:2]}-{cleaned[2:]}"
     prefix, sep, rest = cleaned.partition("-")
-    if not (sep and len(prefix) == 2 and prefix.isalpha() and len(rest) == CODE_RANDOM_CHARS
-            and all(c in CODE_ALPHABET for c in rest)):
-        shown = str(text).strip()[:40]
+    shown = str(text).strip()[:40]
+    if not (sep and len(prefix) == 2 and prefix.isalpha() and len(rest) == CODE_RANDOM_CHARS):
         raise StoreError(f"{shown!r} is not an experiment code: expected two letters, a dash and "
                          f"{CODE_RANDOM_CHARS} characters, e.g. KN-7Q3M")
+    foreign = sorted(set(rest) - set(CODE_ALPHABET))
+    if foreign:                           # the right shape, but characters a code never holds
+        left_out = sorted(set("0123456789ABCDEFGHIJKLMNOPQRSTUVWXYZ") - set(CODE_ALPHABET))
+        raise StoreError(f"{shown!r} is not an experiment code: codes never contain {', '.join(foreign)} "
+                         f"({', '.join(left_out[:-1])} and {left_out[-1]} look alike and are left out)")
     return cleaned
 
 

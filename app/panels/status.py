@@ -9,7 +9,9 @@ RUNNING, PAUSED = "**Running**", "**Paused**"
 
 
 def stopped(message: str) -> str:
-    return f"**Stopped: {message}** Press Run or Reset to start again."
+    """The status line of a stopped run; a message that already says "Stopped …" is not prefixed again."""
+    said = message if message.startswith("Stopped") else f"Stopped: {message}"
+    return f"**{said}** Press Run or Reset to start again."
 
 
 class SimulationStatus:

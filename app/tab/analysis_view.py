@@ -16,7 +16,8 @@ from collections.abc import Callable, Iterator
 
 from app.panels import margins, mode_picker, pole_map
 from app.panels.plots import AnalysisPlots
-from app.panels.text import readout_rows, readouts_table
+from app.panels.readouts import grouped_markdown, pinned_markdown
+from app.panels.text import readout_rows
 from app.tab.state import LabState
 from app.tab.turns import Turns
 from app.tab.worker import TabWorker
@@ -56,6 +57,7 @@ class AnalysisView:
         self.shown_margins: tuple = ([], [], [])
         self.shown_poles: pole_map.PoleView | None = None
         self.readouts = None
+        self.pinned = None                        # the key readouts, above the scope's charts
         self.plots: AnalysisPlots | None = None
         self.pole_table = None
         self.mode_picker: mode_picker.ModePicker | None = None
@@ -67,6 +69,10 @@ class AnalysisView:
         first = next(analyses(exercise, dict(values)))
         self.shown_margins = margins.margin_view(exercise, dict(values))
         return margins.with_margins(first, self.shown_margins)
+
+    def add_pinned(self, gui) -> None:
+        """The key readouts of the worksheet's tasks, above the charts (in view at 1366 x 768)."""
+        self.pinned = gui.add_markdown("")
 
     def add_readouts(self, gui) -> None:
         self.readouts = gui.add_markdown("*computing …*")
@@ -162,7 +168,7 @@ class AnalysisView:
             if not self.is_current(generation):
                 return False
             self.shown_analysis = result
-            self.readouts.content = self.readouts_markdown(result)
+            self._show_readouts(result)
             self.client.flush()                       # the readouts go out now, not with the next window
             self.plots.update(result.plots)
             exercise, values = self.state.exercise, self.state.values_now()
@@ -182,12 +188,16 @@ class AnalysisView:
         """The analysis's figures, then the exercise's figures of the scope window."""
         return readout_rows(result, self.state.exercise, self.state.trace())
 
-    def readouts_markdown(self, result: Analysis) -> str:
-        return readouts_table(self.readout_rows(result), result.notes)
+    def _show_readouts(self, result: Analysis) -> None:
+        """The key readouts above the charts and every readout below them (call holding ``gui_lock``);
+        unchanged texts are not sent again (exercises without scope readouts send nothing each second)."""
+        rows = self.readout_rows(result)
+        for handle, text in ((self.pinned, pinned_markdown(rows, self.state.exercise.key_readouts)),
+                             (self.readouts, grouped_markdown(rows, result.notes))):
+            if handle is not None and handle.content != text:
+                handle.content = text
 
     def refresh_live_readouts(self) -> None:
         """Redraw the readouts with the scope window's current figures (call holding ``gui_lock``)."""
         if self.shown_analysis is not None:
-            readouts = self.readouts_markdown(self.shown_analysis)
-            if readouts != self.readouts.content:     # exercises without scope readouts send nothing
-                self.readouts.content = readouts
+            self._show_readouts(self.shown_analysis)

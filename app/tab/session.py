@@ -32,7 +32,7 @@ import viser
 
 from app.infra import layout
 from app.infra.store import Store
-from app.panels import entry, scope, worksheets
+from app.panels import entry, page, scope, worksheets
 from app.panels.actions import ActionPanel
 from app.panels.docks import Docks
 from app.panels.export import ExportButtons
@@ -40,8 +40,8 @@ from app.panels.inspector import FilterInspector
 from app.panels.live import LivePlots
 from app.panels.plots import plot_chart
 from app.panels.scene_view import SceneView
-from app.panels.scope_charts import ScopeCharts
-from app.panels.status import PAUSED, RUNNING, SimulationStatus
+from app.panels.scope_charts import TIME_AXES, ScopeCharts
+from app.panels.status import PAUSED, RUNNING, SimulationStatus, stopped
 from app.panels.text import escaped
 from app.tab.analysis_view import AnalysisView
 from app.tab.controls import Controls
@@ -84,6 +84,10 @@ class LabSession:
         self.stream: Stream | None = None
         self.inspector: FilterInspector | None = None
         self.download_note = None                 # what the exercise's download button did
+        self.upload_note = None                   # what its upload button did
+        self.time_axis = TIME_AXES[0]             # the scope's time axis, the student's choice for every exercise
+        # the browser reports the 3D view's size with every camera update (also on a resize)
+        client.camera.on_update(lambda _camera: self.post("canvas", self._fit_scene))
         self.worker.start(lambda: self._work(exercise))
 
     @property
@@ -166,9 +170,11 @@ class LabSession:
         self.scene = exercise.scene(self.state.values)
         self._build_gui(exercise)
         self.controls.follow_ranges(exercise)
+        self.controls.follow_values(exercise)
         self.worker.check_open()
         if self.scene is not None:
             self.scene.attach(self.client.scene)
+            self._fit_scene()
         self.worker.check_open()
         self._request_analysis()
         self.stream.start()
@@ -232,11 +238,15 @@ class LabSession:
                                    initial_value=exercise.title,
                                    hint="Switch this tab to another exercise (starts it on its defaults).")
         chooser.on_update(on("exercise", lambda: self._choose(chooser.value)))
+        # beside the chooser: Open switches the exercise, and its note is in view wherever it lands
+        self.saved.add_folder(gui, on, lambda code: self.saved.open(code, self.exercises, self._switch))
+        self.saved.show_codes()
         gui.add_markdown(f"### {exercise.title}")
         self.status.add_line(gui)
         buttons = gui.add_button_group("Simulation", ("Run", "Pause", "Reset"))
         buttons.on_click(on("buttons", lambda: self._on_button(buttons.value)))
         self.status.add_speed(gui)                # filled in while it runs
+        self.controls.add_error_line(gui)         # under the buttons, in view (not at the foot of the controls)
         self.inspector = FilterInspector.add(gui, self.state.simulation, on("inspector step", self._step_one))
         ActionPanel(gui, exercise, on, self.state.values_now, self._still_current(), self.gui_lock,
                     self.worker, self.client, plot_chart)   # the exercise's buttons, if any
@@ -247,6 +257,7 @@ class LabSession:
             upload = gui.add_upload_button("Load recording (CSV)", icon=viser.Icon.UPLOAD, mime_type=".csv,text/csv",
                                            hint=exercise.data_description)
             upload.on_upload(on("upload", lambda: self._on_upload(upload.value)))
+            self.upload_note = gui.add_markdown("")       # what the upload did, right under the button
         if exercise.download_label:
             download = gui.add_button(exercise.download_label, icon=viser.Icon.DOWNLOAD)
             download.on_click(on("download", self._on_download))
@@ -254,16 +265,21 @@ class LabSession:
         self.controls.add(gui, exercise, values)
         gui.add_html(scope.LEGEND_STYLE)
         gui.add_html(entry.STYLE)
-        self.controls.add_error_line(gui)
-        self.saved.add_folder(gui, on, lambda code: self.saved.open(code, self.exercises, self._switch))
-        self.saved.show_codes()
+        gui.add_html(page.STYLE)
+        gui.add_markdown(page.title_markdown(exercise.title))   # the browser tab's title
 
         first = self.analysis.first(exercise, values)
         self.docks.dock(gui)
         tabs = self.docks.tabs
         with tabs["Scope"]:
             live = LivePlots(gui, exercise, self.state.simulation)   # if the exercise has any
-            charts = ScopeCharts(gui, exercise.charts, self.state.columns, self.state.window_ms())
+            self.analysis.add_pinned(gui)
+            time_axis = gui.add_dropdown("Time axis", TIME_AXES, initial_value=self.time_axis,
+                                         hint="Time before the newest sample (rolling), or the time since "
+                                              "Reset, one window after the other (to read when something "
+                                              "happened in the run).")
+            charts = ScopeCharts(gui, exercise.charts, self.state.columns, self.state.window_ms(), self.time_axis)
+            time_axis.on_update(on("time axis", lambda: self._set_time_axis(charts, time_axis.value)))
             self.analysis.add_readouts(gui)
             ExportButtons.add(gui, exercise, on, self._export_snapshot,
                               lambda: self.analysis.readout_rows(self.analysis.shown_analysis),
@@ -287,6 +303,24 @@ class LabSession:
                 if self._current(generation):
                     self.docks.show_worksheet(sheet)
         worksheets.when_measured(exercise, show_measured)
+
+    def _set_time_axis(self, charts: ScopeCharts, time_axis: str) -> None:
+        """The scope's time axis, kept for the tab's next exercises too."""
+        self.time_axis = time_axis
+        with self.gui_lock, self.docks.tabs["Scope"]:
+            if not self.closed and self.stream is not None and self.stream.scope is charts:
+                charts.set_time_axis(self.client.gui, time_axis, self.state.window_ms())
+                self.stream.draw(time.perf_counter())   # also while paused
+
+    def _fit_scene(self) -> None:
+        """Fold the 3D view away while the window leaves it no room (issue 25: at 1024 x 768 it was a
+        cut-off 120 px strip), show it again once there is."""
+        if self.scene is None:
+            return
+        camera = self.client.camera
+        with self.gui_lock:
+            if not self.closed:
+                self.scene_view.fit(self.client.scene, camera.image_width, camera.image_height)
 
     def _still_current(self) -> Callable[[], bool]:
         """Whether the generation being built still owns the tab (for parts that run on threads)."""
@@ -312,13 +346,19 @@ class LabSession:
             return
         self._request_analysis()                  # readouts first: they are what the student watches
         with lab.lock:
-            if parameter.name == "seed" or lab.simulation.status_message():
-                lab.reset()                       # a stopped run is not carried on (it touched down)
+            # a stopped run is not carried on (it touched down), and a run the change invalidates
+            # (a new seed, a replay of other filter settings) starts again, also when it was paused
+            restart = parameter.name == "seed" or lab.exercise.restarts_on_change \
+                or bool(lab.simulation.status_message())
+            if restart:
+                lab.restart()
             else:
                 step_s = lab.simulation.sample_time_s
                 lab.simulation = lab.exercise.retune(lab.simulation, lab.values)
                 if lab.simulation.sample_time_s != step_s:
                     lab.buffer = lab.buffer[:0]   # the scope's rows assume one sample time
+        if restart:
+            self._show_restarted()
         if self.scene is not None:
             try:
                 self.scene.update(dict(lab.values))
@@ -326,21 +366,35 @@ class LabSession:
                 self.problems.report("3D view", error)
 
     def _on_upload(self, uploaded) -> None:
+        """Load an uploaded file; the note under the button says what happened (issue 25: it used to
+        appear at the foot of the controls, out of view)."""
         lab = self.state
         try:
             data = lab.exercise.load_data(uploaded.name, uploaded.content)
         except ParameterError as error:
             named = str(error) if uploaded.name in str(error) else f"{uploaded.name}: {error}"
-            self.controls.error.content = f"⚠️ {escaped(named)}"
+            self.upload_note.content = f"⚠️ Not loaded: {escaped(named)}"
             return
-        self.controls.error.content = f"Loaded {escaped(uploaded.name)}."
+        rows = f" ({len(data)} rows)" if hasattr(data, "__len__") else ""
+        self.upload_note.content = f"✅ Loaded {escaped(uploaded.name)}{rows}: the run starts again with it."
         with lab.lock:
             lab.values["data"] = data
-            lab.reset()
+            lab.restart()
+        self._show_restarted()
         lab.recording = (uploaded.name, uploaded.content)
         self.controls.follow_ranges(lab.exercise)
         self.saved.changed()
         self._request_analysis()
+
+    def _show_restarted(self) -> None:
+        """The status line after a change restarted the run: running again, the stop card gone."""
+        with self.gui_lock:
+            if self.closed:
+                return
+            if not self.stream.alive():
+                self.stream.start()               # never left without a simulation
+            self.status.clear_card()
+            self.status.line.content = RUNNING
 
     def _on_download(self) -> None:
         """Make the file; the note under the button says what happened (issue 11, defect 5: the
@@ -376,7 +430,7 @@ class LabSession:
         with self.gui_lock:
             if self.closed:
                 return
-            self.status.line.content = (f"**Stopped: {message}** Press Run or Reset to start again." if message
+            self.status.line.content = (stopped(message) if message
                                         else "**Paused** (stepping one sample at a time)")
             self.stream.draw(time.perf_counter())
             self._refresh_inspector()

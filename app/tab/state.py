@@ -56,6 +56,12 @@ class LabState:
         self.simulation = self.exercise.simulation(self.values)
         self.buffer = self.buffer[:0]
 
+    def restart(self) -> None:
+        """A new run at the current values, running at once (call holding ``lock``): after a change
+        that invalidates the shown run, the scope never keeps a run the readouts no longer describe."""
+        self.reset()
+        self.running = True
+
     def append(self, trace: np.ndarray) -> None:
         """New samples into the scope window (call holding ``lock``)."""
         self.buffer = scope.append(self.buffer, trace, self.window_rows())

@@ -277,6 +277,8 @@ class EkfDisturbance(Exercise):
     default_duration_s = 0.25
     claims = CLAIMS
     locus = ("pid_gain", CLOSED_LOOP)
+    key_readouts = ("Force estimate settling (±5 %)", "Force estimate noise σ",
+                    "Peak displacement after the step")
     charts = (
         Chart("Disturbance force f_z", "N", (
             Series("estimate", "force_estimated_n", 1.0, "#d62728"),

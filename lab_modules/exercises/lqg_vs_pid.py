@@ -109,6 +109,7 @@ __all__ = ["CLAIMS", "EXERCISE", "FRONT_LQG_FACTORS", "LARGEST_STEP_RESOLUTION_N
            "regulator", "setups", "side_by_side", "stiffness_at"]
 
 T = RIG.sample_time_s
+NO_OVERSHOOT = "none (never reaches the reference)"   # the overshoot readout of a step that stays below
 
 P = Parameter
 PARAMETERS = (
@@ -253,6 +254,9 @@ class LqgVsPid(Exercise):
         Claim("paper 000 §IV, Fig. 8", "PID overshoot, 50 µm reference step", "large, long transient",
               "overshoot_pid_percent", (20, None), "%", duration_s=0.2),
     )
+    key_readouts = ("Ratio filter / regulator", "LQG: overshoot, reference step",
+                    "PID: overshoot, reference step", "LQG: step stiffness Δf/x_max (linear)",
+                    "PID: step stiffness Δf/x_max (linear)")
     charts = (
         Chart("Rotor position", "µm", (
             Series("reference", "reference_m", 1e6, COLORS["reference"]),
@@ -315,6 +319,8 @@ class LqgVsPid(Exercise):
             word = "touched down" if tests[name]["stops"] else "not reached"
             r = {key: (word if isinstance(value, float) and not np.isfinite(value) else value)
                  for key, value in tests[name].items()}
+            if not isinstance(r["reference_overshoot_percent"], str) and r["reference_overshoot_percent"] < 0:
+                r["reference_overshoot_percent"] = NO_OVERSHOOT   # a negative overshoot is no figure to read
             f = linear[name]
             readouts += [
                 (f"{name}: overshoot, reference step", r["reference_overshoot_percent"], "%"),

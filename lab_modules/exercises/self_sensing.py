@@ -328,6 +328,8 @@ class SelfSensing(Exercise):
         "position loop for ISO 14839-3 to grade.  The per-period duty rule sets the next period's "
         "flux from the model and the present flux (a one-period dead-beat, S = 1 − z⁻¹ whatever the "
         "settings), so its margins would say nothing about the estimator.")
+    key_readouts = ("L̂ᴵ error at 4 mm", "L̂ᴵᴵ error at 4 mm", "L̄/L at 4 mm", "Position bias at 4 mm",
+                    "σ̂(L̄) at 4 mm (eq. 31)")
     charts = (
         Chart("Inductance", "mH", (
             Series("L̄ (eq. 18)", "inductance_mean_h", 1e3, "#d62728"),
@@ -485,6 +487,14 @@ class SelfSensing(Exercise):
         carried = SelfSensingSimulation(values, old.retuned(new))
         carried.ripple = simulation.ripple
         return carried
+
+    def report_figures(self, values: dict) -> list:
+        """The estimated inductance and gap through one 4 → 6 → 4 mm cycle (§3.1-3.2), and the two
+        PWM periods' ripple with the fitted lines behind L̂ᴵ and L̂ᴵᴵ (eq. 11-18)."""
+        from lab_modules.exercises._figures import analysis_plots, plot_figure, scope_figure
+        return [scope_figure(self, [("", values)], self.default_duration_s, "One cycle 4 → 6 → 4 mm: "
+                             "inductance and gap, estimated against true", charts=("Inductance", "Gap")),
+                *(plot_figure(plot) for plot in analysis_plots(self, values, ("Ripple of two PWM periods",)))]
 
     def live_readouts(self, trace: dict[str, np.ndarray]) -> list[tuple[str, float, str]]:
         last = slice(-LAST_PERIODS, None)

@@ -196,6 +196,9 @@ class ThrustLiftoff(Exercise):
     worksheet = "thrust_liftoff.md"
     parameters = PARAMETERS
     default_duration_s = 2.0
+    key_readouts = ("Net stiffness of the loop", "Accuracy gain std z / std x̂",
+                    "Steady std of true x, raw PID", "Steady std of true x, filter-PID",
+                    "Time at the current limit")
     charts = (
         Chart("Lift-off: collar position", "µm", (
             Series("measured z", "x_measured_m", 1e6, "#b0b0b0"),
@@ -355,7 +358,7 @@ class ThrustLiftoff(Exercise):
         gains, covariances = design.gain_history(n)
         t = np.arange(n) * T * 1e3
         return Plot("Kalman gain and σ from P0 over the first milliseconds", "time [ms]",
-                    "K_x [1], K_v·1 ms [1], σ_x/5 µm [1]", t,
+                    "gain or σ, scaled [1]", t,          # the legend says how each is scaled
                     (("K_x (x ← z)", gains[:, 0], "#d62728"),
                      ("K_v × 1 ms", gains[:, 1] * 1e-3, "#9467bd"),
                      ("σ_x / 5 µm", np.sqrt(np.maximum(covariances[:, 0, 0], 0.0)) / 5e-6, "#1f77b4")))
@@ -419,6 +422,16 @@ class ThrustLiftoff(Exercise):
     def scene(self, values: dict) -> ThrustBearingScene:
         """The collar between its stator halves, gaps and motion drawn ×40."""
         return ThrustBearingScene(values)
+
+    def report_figures(self, values: dict) -> list:
+        """Fig. 8 (the noise-free lift-offs of both controllers), Fig. 11's accuracy in a noisy run
+        (the estimate error inside ±3σ) and the current-command noise over the sensor noise."""
+        from lab_modules.exercises._figures import analysis_plots, plot_figure, scope_figure
+        plots = analysis_plots(self, values, ("Noise-free lift-off", "Current-command noise"))
+        return [plot_figure(plots[0]),
+                scope_figure(self, [("", values)], self.default_duration_s, "Lift-off with sensor noise "
+                             "(the chosen feedback)", charts=("Lift-off: collar position", "Estimation error x̂ − x, ±3σ")),
+                plot_figure(plots[1])]
 
     def live_readouts(self, trace: dict[str, np.ndarray]) -> list[tuple[str, float, str]]:
         error, sigma = trace["estimation_error_m"], trace["x_sigma_m"]

@@ -1,0 +1,71 @@
+"""The readouts of the Scope tab (issue 25): the key readouts a worksheet's tasks name, pinned
+above the charts where a 1366 x 768 screen shows them without scrolling, and every readout below
+the charts, a long list grouped by what it is about and folded (HTML ``details``, which viser's
+Markdown renders; a group the student opens stays open while its values change)."""
+
+from __future__ import annotations
+
+import html
+
+from app.panels.text import LIVE_SUFFIX, cell, readout
+
+LONG_LIST_ROWS = 20               # a longer list is grouped, its groups folded
+KEY_HEADER = ("| key readout | value | unit |", "|---|---:|---|")
+HEADER = ("| quantity | value | unit |", "|---|---:|---|")
+LIVE_GROUP = "This run (scope window)"
+
+
+def row_markdown(label: str, value, unit: str) -> str:
+    """One table row; a word in place of a number ("touched down") carries no unit."""
+    return f"| {cell(label)} | {readout(value)} | {'' if isinstance(value, str) else cell(unit)} |"
+
+
+def key_rows(rows, keys: tuple[str, ...]) -> list:
+    """The rows named in ``keys`` (an analysis readout's label, or a scope-window readout's without
+    its suffix), in the order of ``keys``; keys without a row yet are left out."""
+    by_label = {label: (label, value, unit) for label, value, unit in rows}
+    found = (by_label.get(key) or by_label.get(key + LIVE_SUFFIX) for key in keys)
+    return [row for row in found if row is not None]
+
+
+def pinned_markdown(rows, keys: tuple[str, ...]) -> str:
+    """The key readouts as a small table ("" when the exercise names none)."""
+    pinned = key_rows(rows, keys)
+    return "\n".join([*KEY_HEADER, *(row_markdown(*row) for row in pinned)]) if pinned else ""
+
+
+def group_of(label: str) -> str | None:
+    """What a readout is about: the scope window, or the part before ": " ("PID: overshoot …")."""
+    if label.endswith(LIVE_SUFFIX):
+        return LIVE_GROUP
+    prefix, colon, _ = label.partition(": ")
+    return prefix if colon else None
+
+
+def table(rows) -> str:
+    return "\n".join([*HEADER, *(row_markdown(*row) for row in rows)])
+
+
+def grouped_markdown(rows, notes=()) -> str:
+    """Every readout under the charts, then the notes in italics: one table, or for a long list the
+    rows about no group first, then a folded section per group of two or more rows (the scope
+    window's open: it follows the run)."""
+    parts = []
+    if len(rows) <= LONG_LIST_ROWS:
+        parts.append(table(rows))
+    else:
+        groups: dict[str | None, list] = {}
+        for row in rows:
+            groups.setdefault(group_of(row[0]), []).append(row)
+        grouped = {name for name, members in groups.items() if name is not None and len(members) >= 2}
+        loose = [row for row in rows if group_of(row[0]) not in grouped]
+        if loose:
+            parts.append(table(loose))
+        for name, members in groups.items():
+            if name in grouped:
+                opened = " open" if name == LIVE_GROUP else ""
+                parts.append(f"<details{opened}><summary><b>{html.escape(name)}</b> ({len(members)} readouts)"
+                             "</summary>\n\n"
+                             f"{table(members)}\n\n</details>")
+    parts += [f"*{note}*" for note in notes]
+    return '<div class="lab-readouts">\n\n' + "\n\n".join(parts) + "\n\n</div>"
