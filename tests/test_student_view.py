@@ -149,3 +149,20 @@ def test_claim_settings_and_other_exercises_are_named_as_the_student_sees_them()
     assert "sigma\\_current\\_ma" not in table and "Current noise σ(i) = 0 mA" in table
     sheet = worksheets.text(get("adaptive_filter"))
     assert "`stiffness_map`" not in sheet and f"*{get('stiffness_map').title}*" in sheet
+
+
+def test_analysis_plots_hold_their_x_range_above_zero_on_a_log_axis():
+    """lqg_vs_pid's fronts went from a two-point placeholder to 159 designs: viser carried the x range
+    over in proportion, below zero on the log axis, and uPlot looped for its ticks ("Invalid array
+    length"). Every plot now holds its own x range: its data, in whole decades on a log axis."""
+    from app.panels.plots import plot_chart, x_range
+    assert x_range(np.array([0.0233, 0.5, 7.43]), True) == (0.01, 10.0)
+    assert x_range(np.array([0.159, 9990.0]), True) == (0.1, 10_000.0)
+    assert x_range(np.array([-5.0, np.nan, 149.8]), False) == (-5.0, 149.8)
+    assert x_range(np.array([np.nan, np.nan]), True) == (0.1, 1.0) and x_range(np.array([2.0]), False) == (1.5, 2.5)
+    from lab_modules.exercises._lqg_vs_pid_fronts import front_plots
+    values = get("lqg_vs_pid").resolve()
+    for plot in front_plots(values, None):                        # the placeholder the first result shows
+        _, options = plot_chart(plot)
+        low, high = options["scales"]["x"]["range"]
+        assert 0 < low < high and plot.log_x
