@@ -148,9 +148,9 @@ def test_lqg_vs_pid_i_pd_and_back_without_console_errors(open_tab):
     page.get_by_role("heading").first.wait_for(timeout=60000)
     tab.switch_exercise(get("lqg_vs_pid").title, timeout_ms=120000)
     _open_folder(page, "PID")
+    row = page.locator("tr").filter(has_text="PID: overshoot, reference step").first   # pinned above the scope
     for _ in range(2):
         _choose(page, "PID structure", "I-PD")
-        row = page.locator("tr").filter(has_text="PID: overshoot, reference step").first
         _wait(lambda: NO_OVERSHOOT in row.inner_text(), 60, "the I-PD overshoot")
         assert row.locator("td").nth(2).inner_text().strip() == ""      # a word carries no unit
         tab.open_panel_tab("Analysis")
