@@ -166,3 +166,23 @@ def test_analysis_plots_hold_their_x_range_above_zero_on_a_log_axis():
         _, options = plot_chart(plot)
         low, high = options["scales"]["x"]["range"]
         assert 0 < low < high and plot.log_x
+
+
+def test_the_3d_view_folds_away_only_when_its_width_changes_sides():
+    from app.panels.scene_view import SceneView
+
+    class Scene:
+        def __init__(self):
+            self.sent = []
+
+        def set_global_visibility(self, visible):
+            self.sent.append(visible)
+    view, scene = SceneView(), Scene()
+    view.fit(scene, 386, 740)                      # 1366 x 768: room
+    view.fit(scene, 120, 740)                      # 1024 x 768: viser's 120 px strip
+    view.fit(scene, 118, 740)                      # a camera drag: nothing new to say
+    view.fit(scene, 0, 0, attached=True)           # a new exercise's scene starts visible: hide it
+    view.fit(scene, 920, 1050)                     # 1920 x 1080
+    assert scene.sent == [False, False, True] and not view.hidden and view.due(10.0, 0.0)
+    view.fit(scene, 120, 740)
+    assert view.hidden and not view.due(10.0, 0.0)  # no animation while hidden

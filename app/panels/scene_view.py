@@ -35,15 +35,17 @@ class SceneView:
         dropdown.on_update(on("3D view", lambda: setattr(self, "refresh", dropdown.value)))
         self.note = gui.add_markdown(HIDDEN_NOTE, visible=self.hidden)
 
-    def fit(self, scene_api, width_px: int, height_px: int) -> None:
-        """The browser reported the 3D view's size: fold the view away while it is too narrow to show
-        the scene (a cut-off strip at 1024 px), show it again once there is room (call holding the
-        tab's GUI lock; also after an exercise switch, whose new scene starts visible)."""
-        if width_px > 0 and height_px > 0:
-            self.hidden = width_px / height_px < MIN_SCENE_ASPECT
-        scene_api.set_global_visibility(not self.hidden)
-        if self.note is not None and self.note.visible != self.hidden:
-            self.note.visible = self.hidden
+    def fit(self, scene_api, width_px: int, height_px: int, attached: bool = False) -> None:
+        """The browser reported the 3D view's size (0: not yet): fold the view away while it is too
+        narrow to show the scene (a cut-off strip at 1024 px), show it again once there is room; a
+        message only when that changes, or for a scene just ``attached`` (it starts visible).  Call
+        holding the tab's GUI lock."""
+        hidden = width_px / height_px < MIN_SCENE_ASPECT if width_px > 0 and height_px > 0 else self.hidden
+        if hidden != self.hidden or attached and hidden:
+            scene_api.set_global_visibility(not hidden)
+        self.hidden = hidden
+        if self.note is not None and self.note.visible != hidden:
+            self.note.visible = hidden
 
     def hold(self) -> None:
         """A control moved: the view waits ``SCENE_QUIET_AFTER_INPUT_S``."""

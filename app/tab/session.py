@@ -174,7 +174,7 @@ class LabSession:
         self.worker.check_open()
         if self.scene is not None:
             self.scene.attach(self.client.scene)
-            self._fit_scene()
+            self._fit_scene(attached=True)
         self.worker.check_open()
         self._request_analysis()
         self.stream.start()
@@ -312,15 +312,15 @@ class LabSession:
                 charts.set_time_axis(self.client.gui, time_axis, self.state.window_ms())
                 self.stream.draw(time.perf_counter())   # also while paused
 
-    def _fit_scene(self) -> None:
+    def _fit_scene(self, attached: bool = False) -> None:
         """Fold the 3D view away while the window leaves it no room (issue 25: at 1024 x 768 it was a
-        cut-off 120 px strip), show it again once there is."""
+        cut-off 120 px strip), show it again once there is (``attached``: its scene is new)."""
         if self.scene is None:
             return
         camera = self.client.camera
         with self.gui_lock:
             if not self.closed:
-                self.scene_view.fit(self.client.scene, camera.image_width, camera.image_height)
+                self.scene_view.fit(self.client.scene, camera.image_width, camera.image_height, attached)
 
     def _still_current(self) -> Callable[[], bool]:
         """Whether the generation being built still owns the tab (for parts that run on threads)."""
