@@ -186,3 +186,18 @@ def test_the_3d_view_folds_away_only_when_its_width_changes_sides():
     assert scene.sent == [False, False, True] and not view.hidden and view.due(10.0, 0.0)
     view.fit(scene, 120, 740)
     assert view.hidden and not view.due(10.0, 0.0)  # no animation while hidden
+
+
+def test_an_export_names_the_file_it_sent_under_its_buttons():
+    from types import SimpleNamespace
+
+    from app.panels.export import ExportButtons
+    sent = []
+    exercise = get("kalman_noise")
+    buttons = ExportButtons(exercise, lambda: (np.zeros((3, 1 + 1)), exercise.resolve(), ("x_true_m",), "KN-7Q3M"),
+                            lambda: [("RMS displacement", 0.47, "µm")], lambda *args, **_: sent.append(args))
+    buttons.note = SimpleNamespace(content="")
+    buttons.send_readouts()
+    name, content = sent[0]
+    assert buttons.note.content.startswith("✅ Sent kalman") and "readouts" in name and \
+        f"({len(content) / 1e3:.0f} kB)" in buttons.note.content

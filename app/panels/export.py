@@ -22,6 +22,7 @@ import viser
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from app.panels.text import escaped
 from lab_modules.exercises import Chart, Exercise
 from lab_modules.exercises._figures import draw_chart
 
@@ -122,6 +123,7 @@ class ExportButtons:
         ``readout_rows()`` the readouts shown; ``send(filename, content, save_immediately=True)``
         sends a file to the browser."""
         self.exercise, self.snapshot, self.readout_rows, self.send = exercise, snapshot, readout_rows, send
+        self.note = None                          # what the last button sent, under the buttons
 
     @classmethod
     def add(cls, gui, exercise: Exercise, on, snapshot, readout_rows, send) -> ExportButtons:
@@ -137,19 +139,26 @@ class ExportButtons:
             for label, action in choices.items():
                 button = gui.add_button(label, icon=viser.Icon.DOWNLOAD)
                 button.on_click(on(("export", label), action))
+            buttons.note = gui.add_markdown("")
         return buttons
+
+    def _send(self, name: str, content) -> None:
+        """Send a file; the note under the buttons names it (the student sees what a press did)."""
+        self.send(name, content, save_immediately=True)
+        if self.note is not None:
+            self.note.content = f"✅ Sent {escaped(name)} ({len(content) / 1e3:.0f} kB)."
 
     def send_scope(self) -> None:
         buffer, values, columns, code = self.snapshot()
-        content = scope_csv(self.exercise, columns, buffer, values, code)
-        self.send(filename(self.exercise, code, "scope", "csv"), content, save_immediately=True)
+        self._send(filename(self.exercise, code, "scope", "csv"),
+                   scope_csv(self.exercise, columns, buffer, values, code))
 
     def send_readouts(self) -> None:
         _, values, _, code = self.snapshot()
-        content = readouts_csv(self.exercise, self.readout_rows(), values, code)
-        self.send(filename(self.exercise, code, "readouts", "csv"), content, save_immediately=True)
+        self._send(filename(self.exercise, code, "readouts", "csv"),
+                   readouts_csv(self.exercise, self.readout_rows(), values, code))
 
     def send_chart(self, chart: Chart) -> None:
         buffer, _, columns, code = self.snapshot()
-        content = chart_png(self.exercise, chart, columns, buffer, code)
-        self.send(filename(self.exercise, code, chart.title, "png"), content, save_immediately=True)
+        self._send(filename(self.exercise, code, chart.title, "png"),
+                   chart_png(self.exercise, chart, columns, buffer, code))
