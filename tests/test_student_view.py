@@ -199,5 +199,5 @@ def test_an_export_names_the_file_it_sent_under_its_buttons():
     buttons.note = SimpleNamespace(content="")
     buttons.send_readouts()
     name, content = sent[0]
-    assert buttons.note.content.startswith("✅ Sent kalman") and "readouts" in name and \
+    assert buttons.note.content.startswith("✓ Sent kalman") and "readouts" in name and \
         f"({len(content) / 1e3:.0f} kB)" in buttons.note.content

@@ -146,7 +146,7 @@ class ExportButtons:
         """Send a file; the note under the buttons names it (the student sees what a press did)."""
         self.send(name, content, save_immediately=True)
         if self.note is not None:
-            self.note.content = f"✅ Sent {escaped(name)} ({len(content) / 1e3:.0f} kB)."
+            self.note.content = f"✓ Sent {escaped(name)} ({len(content) / 1e3:.0f} kB)."
 
     def send_scope(self) -> None:
         buffer, values, columns, code = self.snapshot()

@@ -94,7 +94,7 @@ class SavedExperiments:
             self.saved_note.content = f"⚠️ {escaped(error)}"
             return
         recording = (saved.recording_name, saved.recording) if saved.recording is not None else None
-        self.opened_note = f"✅ Opened **{saved.code}** ({escaped(exercise.title)})."
+        self.opened_note = f"✓ Opened **{saved.code}** ({escaped(exercise.title)})."
         try:
             switch(exercise, saved.parameters, recording)
         finally:

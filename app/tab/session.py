@@ -376,7 +376,7 @@ class LabSession:
             self.upload_note.content = f"⚠️ Not loaded: {escaped(named)}"
             return
         rows = f" ({len(data)} rows)" if hasattr(data, "__len__") else ""
-        self.upload_note.content = f"✅ Loaded {escaped(uploaded.name)}{rows}: the run starts again with it."
+        self.upload_note.content = f"✓ Loaded {escaped(uploaded.name)}{rows}: the run starts again with it."
         with lab.lock:
             lab.values["data"] = data
             lab.restart()
