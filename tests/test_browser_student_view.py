@@ -124,7 +124,7 @@ def test_a_q_change_restarts_the_stopped_replay(open_tab):
     _choose(page, "Time axis", "time since reset")
     innovation = _wait(lambda: next((c for c in page.evaluate(CHARTS_JS) if c["title"].startswith("Innovation")
                                      and c["xlabel"].startswith("time since reset")), None), 20, "since-reset scope")
-    assert innovation["x"][0] == 0.0                              # the first page of the new run, from reset
+    assert innovation["x"][0] < 2.0                               # early in the new run, not the old one's 6 s end
     assert not tab.errors, tab.errors
 
 
