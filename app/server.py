@@ -129,6 +129,7 @@ def serve(settings: Settings) -> int:
     chosen = get(settings.exercise)
     chosen.simulation(chosen.resolve({})).advance(1)       # compile the loop before the first tab
     _limit_malloc_arenas()
+    traffic.wake_on_the_loop()
     server = viser.ViserServer(host=settings.host, port=settings.port, label="AMB estimation lab", verbose=False)
     if server.get_port() != settings.port:                 # taken between the check and the start
         server.stop()

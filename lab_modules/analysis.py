@@ -475,8 +475,9 @@ def participation(A) -> tuple[np.ndarray, np.ndarray]:
     (right eigenvector v_k, left eigenvector w_k, Pérez-Arriaga, Verghese and Schweppe, IEEE
     Trans. PAS-101 (1982) 3117): how much state i takes part in mode k.  Unlike the eigenvector's
     entries they do not depend on the states' units (a diagonal scaling of the states cancels in
-    v_ik w_ik), so metres, amperes and volts compare fairly."""
-    A = np.asarray(A, dtype=float)
+    v_ik w_ik), so metres, amperes and volts compare fairly.  A may be complex (the spinning
+    rotor's loop in r = x + i y)."""
+    A = np.asarray(A, dtype=complex if np.iscomplexobj(A) else float)
     eigenvalues, right = scipy.linalg.eig(A)
     left = np.linalg.inv(right).T                      # rows of V⁻¹: left eigenvectors with w_kᵀ v_k = 1
     p = np.abs(right * left)

@@ -13,6 +13,8 @@ import math
 import re
 from dataclasses import dataclass, field
 
+from lab_modules.formatting import PENDING, RANGE_END_DIGITS, number, range_digits
+
 
 @dataclass(frozen=True)
 class Claim:
@@ -70,31 +72,36 @@ class Claim:
         return (low is None or value >= low) and (high is None or value <= high)
 
     def accept_text(self) -> str:
-        """The accepted range as text, e.g. ``">= 75 %"`` or ``"2.9 ... 3.3 N/µm"``."""
-        low, high = self.accept
-        if low is not None and low == high:
-            return f"= {low:g} {self.unit}".strip()
+        """The accepted range as text, e.g. ``"≥ 75 %"`` or ``"2.945 … 3.255 N/µm"``: each end as
+        the code writes it (``lab_modules.formatting.RANGE_END_DIGITS``)."""
+        low, high = (end if end is None else number(end, RANGE_END_DIGITS) for end in self.accept)
+        if low is not None and self.accept[0] == self.accept[1]:
+            return f"= {low} {self.unit}".strip()
         if low is not None and high is not None:
-            return f"{low:g} … {high:g} {self.unit}".strip()
+            return f"{low} … {high} {self.unit}".strip()
         if low is not None:
-            return f"≥ {low:g} {self.unit}".strip()
-        return f"≤ {high:g} {self.unit}".strip()
+            return f"≥ {low} {self.unit}".strip()
+        return f"≤ {high} {self.unit}".strip()
+
+    def value_text(self, value: float | None) -> str:
+        """The lab's ``value`` with the claim's unit, with the digits that place it inside or
+        outside the accepted range as ``holds`` does ("10.05 N/A" beside "10.04 … 10.06 N/A");
+        ``…`` while not yet measured, "—" (no unit) for NaN."""
+        text = format_value(value, self.accept)
+        return f"{text} {self.unit}" if self.unit and value is not None and not math.isnan(value) else text
 
 
 #: The line in a worksheet where the paper-vs-lab table is rendered.
 WORKSHEET_MARKER = "<!-- claims -->"
-PENDING = "…"
 
 
-def format_value(value: float | None) -> str:
-    """A lab value for a table: three significant digits, ``…`` while not yet measured."""
+def format_value(value: float | None, accept: tuple[float | None, float | None] = (None, None)) -> str:
+    """A lab value for a table as ``lab_modules.formatting.number`` writes it (``…`` while not yet
+    measured), with the significant digits (at least 3) that place it inside or outside
+    ``accept`` as ``Claim.holds`` does (``formatting.range_digits``)."""
     if value is None:
         return PENDING
-    if not math.isfinite(value):
-        return "not finite"
-    if 1e4 <= abs(value) < 1e9:
-        return f"{value:,.0f}".replace(",", " ")
-    return f"{value:.3g}" if 1e-3 <= abs(value) < 1e5 or value == 0 else f"{value:.3e}"
+    return number(value, range_digits(value, [end for end in accept if end is not None]))
 
 
 def status(claim: Claim, value: float | None) -> str:
@@ -124,10 +131,10 @@ def markdown_table(claims: tuple[Claim, ...], values: list[float | None] | None 
     values = values if values is not None else [None] * len(claims)
     rows = ["| source | claim | paper | lab | accepted | status |", "|---|---|---|---|---|---|"]
     for claim, value in zip(claims, values):
-        lab = format_value(value) + (f" {claim.unit}" if value is not None and claim.unit else "")
         quantity = claim.quantity + (f" (with {settings_text(claim.settings, parameters)})" if claim.settings else "")
         rows.append("| " + " | ".join(_cell(text) for text in (
-            claim.source, quantity, claim.paper, lab, claim.accept_text(), status(claim, value))) + " |")
+            claim.source, quantity, claim.paper, claim.value_text(value), claim.accept_text(),
+            status(claim, value))) + " |")
     notes = [f"- *{_plain(claim.quantity)}*{' (deviation)' if claim.deviation else ''}: {_plain(claim.note)}"
              for claim in claims if claim.note]
     return "\n".join(rows + ([""] + notes if notes else []))
@@ -142,9 +149,10 @@ def settings_text(settings: dict, parameters: tuple = ()) -> str:
         parameter = labelled.get(name)
         if parameter is None:
             return f"{name} = {value}"
-        unit = f" {parameter.unit}" if parameter.unit and not isinstance(value, str) else ""
-        return f"{parameter.label} = {value:g}{unit}" if isinstance(value, (int, float)) \
-            else f"{parameter.label} = {value}"
+        if isinstance(value, (str, bool)):                  # a choice or a switch: no unit
+            return f"{parameter.label} = {value}"
+        unit = f" {parameter.unit}" if parameter.unit else ""
+        return f"{parameter.label} = {number(value, RANGE_END_DIGITS)}{unit}"
     return ", ".join(one(name, value) for name, value in settings.items())
 
 

@@ -1,17 +1,61 @@
-"""Exercise parameters: name, unit, default, range, and validation.
+"""Exercise parameters: name, unit, default, range, validation and SI value.
 
 A bad value never reaches the physics: ``resolve`` raises ``ParameterError``
-with one line that names the parameter and its valid range.
+with one line that names the parameter and its valid range.  A control shown in
+µs, mm or mA is converted to SI once, where the physics reads it: ``in_si``.
 """
 
 from __future__ import annotations
 
 import math
+import re
+from collections.abc import Iterable
 from dataclasses import dataclass
+from functools import cache
 
 
 class ParameterError(ValueError):
     """A parameter name or value is not acceptable (one-line message)."""
+
+
+#: SI value = shown value × factor, for each scaled unit the lab's controls use.  Every control's
+#: unit is here, already SI or without a unit (``si_factor``; tested for every exercise).
+SI_FACTORS = {
+    "µs": 1e-6, "ms": 1e-3,
+    "µm": 1e-6, "mm": 1e-3,
+    "mA": 1e-3, "mV": 1e-3,
+    "%": 1e-2,
+    "A/mm": 1e3, "A/(mm·s)": 1e3, "A·s/mm": 1e3,
+    "N/µm": 1e6,
+    "N·mm²/A²": 1e-6, "mm⁴/A⁴": 1e-12,
+    "rpm": math.pi / 30, "rpm/s": math.pi / 30,      # to rad/s and rad/s²
+}
+#: A unit made of these symbols (joined by / · ( ) ² ³ ⁴ 1) is SI: unprefixed only, ``mm`` is not ``m``.
+SI_SYMBOLS = frozenset(("m", "kg", "s", "A", "K", "mol", "cd", "rad", "sr", "Hz", "N", "Pa", "J", "W", "C",
+                        "V", "F", "Ω", "S", "Wb", "T", "H"))
+_SI_OPERATORS = re.compile(r"[/·()²³⁴1]+")
+#: Shown as they are used: a pure number, a factor, a count of samples, a matrix whose entries are SI.
+UNSCALED = frozenset(("", "×", "samples", "SI"))
+
+
+@cache
+def si_factor(unit: str) -> float:
+    """The factor that takes a value shown in ``unit`` to SI; ``ParameterError`` for a unit that is
+    neither in ``SI_FACTORS`` nor made of SI symbols (a prefixed unit nobody listed)."""
+    if unit in SI_FACTORS:
+        return SI_FACTORS[unit]
+    symbols = [s for s in _SI_OPERATORS.split(unit) if s]
+    if unit in UNSCALED or (symbols and all(s in SI_SYMBOLS for s in symbols)):
+        return 1.0
+    raise ParameterError(f"unit {unit!r} has no known SI factor: add it to parameters.SI_FACTORS")
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 @dataclass(frozen=True)
@@ -63,6 +107,17 @@ class Parameter:
             return int(number)
         return number
 
+    @property
+    def numeric(self) -> bool:
+        """A number, or a choice among numbers (their texts, e.g. "-0.5" mm)."""
+        return all(_is_number(choice) for choice in self.choices)
+
+    def si(self, values: dict) -> float:
+        """This control's value in ``values`` in SI units: value × ``si_factor(unit)`` (the same
+        multiplication as by hand, so ``x * 1e-6`` keeps its last bit); a choice read as a number."""
+        value = values[self.name]
+        return (float(value) if self.choices else value) * si_factor(self.unit)
+
     def describe(self) -> dict:
         """JSON description for ``python -m app list --json``."""
         entry = {"name": self.name, "label": self.label, "unit": self.unit,
@@ -83,3 +138,10 @@ def resolve(parameters: tuple[Parameter, ...], overrides: dict | None = None) ->
             raise ParameterError(f"unknown parameter {name!r}: expected one of {', '.join(by_name)}")
         values[name] = by_name[name].parse(value)
     return values
+
+
+def in_si(parameters: Iterable[Parameter], values: dict) -> dict[str, float]:
+    """The numeric controls of ``values`` in SI units, by name (``Parameter.si``): read once where
+    the physics starts, ``si["sensor_lag_us"]`` is T_mx in s.  Controls absent from ``values`` and
+    choices among words are left out."""
+    return {p.name: p.si(values) for p in parameters if p.numeric and p.name in values}

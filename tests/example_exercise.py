@@ -17,8 +17,8 @@ import scipy.linalg
 from lab_modules import analysis
 from lab_modules.claims import Claim
 from lab_modules.estimators.kalman import KalmanFilter
-from lab_modules.exercises import Analysis, Chart, Exercise, Series, registry
-from lab_modules.parameters import Parameter
+from lab_modules.exercises import Analysis, Chart, Exercise, PoleCategory, Series, registry
+from lab_modules.parameters import Parameter, in_si
 
 T = 1e-3                                        # sample time [s]
 P = Parameter
@@ -41,7 +41,7 @@ def discrete_model(values: dict) -> tuple:
     m, k, c = values["mass_kg"], values["stiffness_n_per_m"], values["damping_n_s_per_m"]
     plant = control.c2d(control.ss([[0, 1], [-k / m, -c / m]], [[0], [1 / m]], [[1, 0]], 0), T)
     A, B, C = np.asarray(plant.A), np.asarray(plant.B), np.asarray(plant.C)
-    return A, B, C, values["force_noise_n"] ** 2 * B @ B.T, np.array([[(values["sensor_noise_mm"] * 1e-3) ** 2]])
+    return A, B, C, values["force_noise_n"] ** 2 * B @ B.T, np.array([[in_si(PARAMETERS, values)["sensor_noise_mm"] ** 2]])
 
 
 class SpringSimulation:
@@ -59,7 +59,7 @@ class SpringSimulation:
 
     def advance(self, n_steps: int) -> np.ndarray:
         rows = np.empty((n_steps, 1 + len(self.columns)))
-        sigma_w, sigma_eta = self.values["force_noise_n"], self.values["sensor_noise_mm"] * 1e-3
+        sigma_w, sigma_eta = self.values["force_noise_n"], in_si(PARAMETERS, self.values)["sensor_noise_mm"]
         for row in rows:
             t = self.step * T
             force = self.values["force_amplitude_n"] * np.sign(np.sin(np.pi * t))     # F(t), period 2 s
@@ -119,6 +119,9 @@ class SpringExample(Exercise):
                  "filter error": analysis.z_to_s(np.linalg.eigvals(A - A @ K @ C), T)}   # e⁺ ← (I − K C) A e⁺
         return Analysis(readouts, poles)
 
+    def pole_categories(self, values: dict) -> dict[str, PoleCategory]:
+        return {"open-loop plant": PoleCategory.PLANT, "filter error": PoleCategory.FILTER_ERROR}
+
     def simulation(self, values: dict) -> SpringSimulation:
         return SpringSimulation(values)
 
@@ -134,7 +137,7 @@ class SpringExample(Exercise):
                 "mean_nees": float(np.mean(nees)),
                 "nees_independent_samples": analysis.independent_samples((x_estimated - x_true) / trace[:, 4]),
                 "error_over_noise": float(np.sqrt(np.mean((x_estimated - x_true) ** 2))
-                                          / (values["sensor_noise_mm"] * 1e-3))}
+                                          / in_si(PARAMETERS, values)["sensor_noise_mm"])}
 
 
 EXERCISE = SpringExample()

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import time
 
-from app.panels.text import SUPERSCRIPT
+from lab_modules.formatting import INFINITY, MINUS_INFINITY, NOT_A_NUMBER, SUPERSCRIPT
 
 #: the visible pole maps: title, x range, series labels and stroke colours, top-axis labels and
 #: each series' points [[Re s, Im s], ...] (uPlot holds one x array; a series is NaN where it has no pole)
@@ -51,13 +51,13 @@ def readout_rows(page) -> list[tuple[str, str, str]]:
 
 
 def shown_number(text: str) -> float | str:
-    """A readout value as the page shows it ("480 000", "7.5·10⁻⁸", "—", "∞ (unstable)") as a float;
+    """A readout value as the page shows it ("480 000", "7.5·10⁻⁸", "—", "∞") as a float;
     anything else (a word, or a formula) comes back as the text."""
     plain = text.replace("\u202f", "")
-    if plain == "—":
+    if plain == NOT_A_NUMBER:
         return float("nan")
-    if plain == "∞ (unstable)":
-        return float("inf")
+    if plain in (INFINITY, MINUS_INFINITY):
+        return float(plain.replace(INFINITY, "inf"))
     if "·10" in plain:
         mantissa, exponent = plain.split("·10", 1)
         plain = f"{mantissa}e{exponent.translate(UNSUPERSCRIPT)}"

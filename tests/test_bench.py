@@ -10,8 +10,8 @@ from app.commands import bench
 
 @pytest.mark.parametrize("use_estimate", [False, True])
 def test_filterpy_loop_reproduces_the_compiled_loop(use_estimate):
-    reference = bench.filterpy_loop(bench._simulation(use_estimate, seed=3), 2000)
-    compiled = bench._simulation(use_estimate, seed=3).advance(2000)
+    reference = bench.filterpy_loop(bench.benchmark_simulation(use_estimate, seed=3), 2000)
+    compiled = bench.benchmark_simulation(use_estimate, seed=3).advance(2000)
     estimate = compiled[:, 1 + bench.radial_axis_loop.TRACE_COLUMNS.index("x_estimated_m")]
     scale = max(abs(reference).max(), 1e-30)
     assert abs(estimate - reference).max() / scale < 1e-9

@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import time
 
-from app.panels import margins
 from app.tab.analysis_view import analyses as _analyses
+from lab_modules.evaluation import margins
 from lab_modules.exercises import get
 from tests.conftest import browser_only
 

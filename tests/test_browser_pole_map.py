@@ -10,6 +10,7 @@ import time
 import pytest
 
 from app.panels import pole_map
+from lab_modules.evaluation import poles as pole_sets
 from lab_modules.exercises import get
 from tests.conftest import browser_only
 from tests.page_reading import pole_maps as _maps
@@ -24,7 +25,7 @@ def test_pole_map_legend_ranges_and_locus(open_tab, tmp_path):
     page.get_by_role("heading", name=get("kalman_noise").title).wait_for(timeout=60000)
     tab.open_panel_tab("Pole map")
     page.get_by_text("Colours (every exercise)", exact=False).first.wait_for(timeout=20000)
-    for category in pole_map.CATEGORIES:
+    for category in pole_sets.CATEGORIES:
         assert page.get_by_text(category.meaning, exact=False).count(), category
     table = page.locator("table:visible").filter(has_text="f_n [Hz]").first
     table.wait_for(timeout=10000)
@@ -46,7 +47,7 @@ def test_pole_map_legend_ranges_and_locus(open_tab, tmp_path):
     page.get_by_text("Colours (every exercise)", exact=False).first.wait_for(timeout=20000)
     for m in _maps(page):
         assert m["x"][1] > 36.4 * 1.05, m                 # defect 3: the unstable open-loop pole
-        assert m["strokes"][0] == pole_map.BY_NAME["plant"].color, m
+        assert m["strokes"][0] == pole_sets.BY_NAME["plant"].color, m
     page.screenshot(path=str(tmp_path / "maglev_tracking.png"))
 
     tab.switch_exercise(get("ekf_parameters").title)
@@ -68,8 +69,8 @@ def test_show_mode_rings_the_mode_and_names_it(open_tab, tmp_path):
     page.get_by_role("heading", name=exercise.title).wait_for(timeout=60000)
     tab.open_panel_tab("Pole map")
     values = exercise.resolve()
-    view = pole_map.view(exercise, values, first_analysis(exercise, values).poles)
-    mode = next(m for m in pole_map.modes(view.poles, view.names, view.shares)
+    view = pole_sets.view(exercise, values, first_analysis(exercise, values).poles)
+    mode = next(m for m in pole_sets.modes(view.poles, view.names, view.shares)
                 if m.label == "rotor position/velocity (suspension mode)")
     page.get_by_label("Show mode", exact=True).first.click()
     page.get_by_role("option", name=pole_map.mode_choice(mode), exact=True).click()

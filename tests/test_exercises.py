@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from lab_modules.exercises import Analysis, Plot
-from lab_modules.parameters import ParameterError
+from lab_modules.parameters import ParameterError, in_si, si_factor
 from tests.example_exercise import contract_exercises
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -36,6 +36,30 @@ def test_parameters_are_described_with_units_and_ranges(exercise):
             assert p.minimum <= p.default <= p.maximum, p.name
     values = exercise.resolve({})
     assert set(names) <= set(values)
+
+
+def test_every_parameter_has_a_known_si_factor(exercise):
+    """A unit outside ``parameters.SI_FACTORS`` passes only if it is SI or has no unit (else
+    ParameterError names it); every numeric control's default reads in SI as default × factor."""
+    values = exercise.resolve({})
+    si = in_si(exercise.parameters, values)
+    for p in exercise.parameters:
+        factor = si_factor(p.unit)
+        if p.numeric:
+            assert si[p.name] == float(values[p.name]) * factor, p.name
+        else:
+            assert p.name not in si
+
+
+def test_a_control_name_has_one_si_factor_in_every_exercise():
+    """The helpers convert a control by its name with one definition (``_common`` with the shared
+    radial-axis controls): the same name must scale alike wherever it appears (lqg_vs_pid's LQR
+    weights and the maglev's process noise share names q_* but both are SI)."""
+    factors: dict[str, set[float]] = {}
+    for exercise in EXERCISES.values():
+        for p in exercise.parameters:
+            factors.setdefault(p.name, set()).add(si_factor(p.unit))
+    assert {name: found for name, found in factors.items() if len(found) > 1} == {}
 
 
 def test_out_of_range_value_names_parameter_and_range(exercise):

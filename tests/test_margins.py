@@ -12,8 +12,8 @@ import control
 import numpy as np
 import pytest
 
-from app.panels.margins import MARGIN_GRID_POINTS, margin_view
 from lab_modules import analysis
+from lab_modules.evaluation.margins import MARGIN_GRID_POINTS, margin_view
 from lab_modules.exercises import get
 from lab_modules.exercises.kalman_noise import setup
 from tests.example_exercise import contract_exercises

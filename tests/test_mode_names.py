@@ -11,6 +11,7 @@ import scipy.linalg
 
 from app.panels import pole_map
 from lab_modules import analysis
+from lab_modules.evaluation import poles as pole_sets
 from lab_modules.exercises import Analysis, get, registry
 from lab_modules.exercises._common import axis_loop_modes, axis_mode_matrices
 from lab_modules.exercises.kalman_noise import setup
@@ -24,9 +25,9 @@ def poles_of(exercise, values) -> dict:
     return (result if isinstance(result, Analysis) else next(iter(result))).poles
 
 
-def named(exercise, values) -> list[pole_map.Mode]:
-    view = pole_map.view(exercise, values, poles_of(exercise, values))
-    return pole_map.modes(view.poles, view.names, view.shares)
+def named(exercise, values) -> list[pole_sets.Mode]:
+    view = pole_sets.view(exercise, values, poles_of(exercise, values))
+    return pole_sets.modes(view.poles, view.names, view.shares)
 
 
 def test_at_least_the_radial_axis_exercises_name_their_modes():
@@ -102,7 +103,7 @@ def test_separation_filter_error_modes_carry_the_same_name_in_the_loop():
     assert {"PID integrator", "PID derivative filter", "rotor position/velocity (suspension mode)"} <= control_names
 
 
-def _mode(exercise, values, set_name, name) -> pole_map.Mode:
+def _mode(exercise, values, set_name, name) -> pole_sets.Mode:
     found = [m for m in named(exercise, values) if m.set_name == set_name and m.label == name]
     assert len(found) == 1, (name, [(m.label, m.pole) for m in named(exercise, values) if m.set_name == set_name])
     return found[0]
@@ -125,7 +126,7 @@ def test_names_follow_the_physics_when_sliders_move():
     stiff = exercise.resolve({"pid_gain": 1.5 * base["pid_gain"]})
     stiff_suspension = _mode(exercise, stiff, "closed loop", suspension.label)
     assert stiff_suspension.natural_hz > 1.1 * suspension.natural_hz
-    assert pole_map.follow(pole_map.view(exercise, stiff, poles_of(exercise, stiff)), suspension).pole == \
+    assert pole_map.follow(pole_sets.view(exercise, stiff, poles_of(exercise, stiff)), suspension).pole == \
         stiff_suspension.pole
 
 
@@ -151,7 +152,7 @@ def test_sensor_placement_names_rotor_modes_and_pid():
 def test_marked_mode_is_ringed_and_described():
     exercise = get("kalman_noise")
     values = exercise.resolve()
-    view = pole_map.view(exercise, values, poles_of(exercise, values))
+    view = pole_sets.view(exercise, values, poles_of(exercise, values))
     mode = _mode(exercise, values, "closed loop", "rotor position/velocity (suspension mode)")
     assert pole_map.chosen(view, pole_map.mode_choice(mode)) == mode
     for data, options in pole_map.charts(view, mode):

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from app.panels.pole_map import charts as _pole_charts
-from app.panels.pole_map import dominant_decay_rad_s
+from lab_modules.evaluation.poles import dominant_decay_rad_s
 
 POLES = {"plant": np.array([-20000.0, -5000.0, -193.0, 193.0]),
          "loop": np.array([-235 + 1205j, -235 - 1205j, -24.0, -22 + 4461j, -22 - 4461j,

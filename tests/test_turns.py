@@ -22,7 +22,7 @@ def _queue_up(shared: Turns, names: list[str], order: list[str], hold_s: float =
         thread = threading.Thread(target=work)
         thread.start()
         deadline = time.perf_counter() + 2
-        while len(shared._waiting) <= len(threads) and time.perf_counter() < deadline:   # this one waits too
+        while len(shared.waiting_line) <= len(threads) and time.perf_counter() < deadline:   # this one waits too
             time.sleep(0.001)
         threads.append(thread)
     return threads
@@ -70,7 +70,7 @@ def test_a_waiting_thread_whose_work_is_moot_leaves_the_queue_at_once():
         waiting = threading.Thread(target=superseded)
         waiting.start()
         deadline = time.perf_counter() + 2
-        while len(shared._waiting) < 2 and time.perf_counter() < deadline:
+        while len(shared.waiting_line) < 2 and time.perf_counter() < deadline:
             time.sleep(0.001)
         later = _queue_up(shared, ["b"], order)
         started = time.perf_counter()
@@ -78,7 +78,7 @@ def test_a_waiting_thread_whose_work_is_moot_leaves_the_queue_at_once():
         wake.set()                                     # ... and woke its analysis thread
         waiting.join(2)
         assert time.perf_counter() - started < 0.2 and outcome == {"held": False}
-        assert len(shared._waiting) == 2               # a and b still wait, in order
+        assert len(shared.waiting_line) == 2               # a and b still wait, in order
     for thread in first + later:
         thread.join(5)
     assert order == ["a", "b"]
@@ -92,10 +92,10 @@ def _readouts(value: str) -> dict:
 
 def test_the_bench_times_a_slider_move_to_its_new_readout():
     tab = Tab("ws://unused", ("Rotor position [µm]",))
-    tab._read_readout(_readouts("0.47"), now=1.0)      # the first readouts: nothing was moved
+    tab.read_readout(_readouts("0.47"), now=1.0)      # the first readouts: nothing was moved
     tab.moved_at = 2.0
-    tab._read_readout(_readouts("0.47"), now=2.1)      # the scope-window rows refreshed: not the answer
-    tab._read_readout(_readouts("0.61"), now=2.3)
-    tab._read_readout(_readouts("0.47"), now=2.5)      # no move pending: no latency
+    tab.read_readout(_readouts("0.47"), now=2.1)      # the scope-window rows refreshed: not the answer
+    tab.read_readout(_readouts("0.61"), now=2.3)
+    tab.read_readout(_readouts("0.47"), now=2.5)      # no move pending: no latency
     assert tab.latencies == [(2.3, pytest.approx(0.3))]
     assert tab.latencies_in(2.0, 3.0) == [pytest.approx(0.3)] and tab.latencies_in(0.0, 2.0) == []

@@ -27,7 +27,7 @@ from lab_modules.exercises import get, registry
 from lab_modules.loops import radial_axis_loop
 
 
-def _simulation(use_estimate: bool = True, seed: int = 0):
+def benchmark_simulation(use_estimate: bool = True, seed: int = 0):
     exercise = get("kalman_noise")
     values = exercise.resolve({"feedback": "estimated" if use_estimate else "measured", "seed": seed})
     return exercise.simulation(values)
@@ -44,13 +44,13 @@ def filterpy_loop(sim, n_steps: int) -> np.ndarray:
     kf.F, kf.B = kf_lab.A[:n, :n].copy(), kf_lab.B[:n].reshape(n, 1).copy()
     kf.H, kf.Q, kf.R = kf_lab.C[:, :n].copy(), kf_lab.Q[:n, :n].copy(), np.diag(kf_lab.R_diag)
     kf.x, kf.P = kf_lab.x.reshape(n, 1).copy(), kf_lab.covariance.copy()
-    Ac, Bc, Cc, Dc = sim._ctrl_matrices
+    Ac, Bc, Cc, Dc = sim.controller_matrices
     ctrl, plant = sim.ctrl.copy(), sim.plant.copy()
-    physics, sigma = sim._physics, setup.noise_sigma
+    physics, sigma = sim.physics, setup.noise_sigma
     K_mx, K_mi, T = physics[9], physics[10], physics[8]
     reference, disturbance = sim.inputs(n_steps)
     noise = sim.noise(n_steps)
-    A4, Bu4, Bf4 = sim._plant_linear
+    A4, Bu4, Bf4 = sim.plant_linear
     scratch = [np.empty(4) for _ in range(5)]
     estimates = np.empty(n_steps)
     for k in range(n_steps):
@@ -59,11 +59,11 @@ def filterpy_loop(sim, n_steps: int) -> np.ndarray:
         estimates[k] = kf.x[0, 0]
         feedback = K_mx * kf.x[0, 0] if setup.use_estimate else y[0]
         e = K_mx * reference[k] - feedback
-        u = float(np.clip(Cc[0] @ ctrl + Dc[0, 0] * e, -sim._u_limit, sim._u_limit))
+        u = float(np.clip(Cc[0] @ ctrl + Dc[0, 0] * e, -sim.u_limit_v, sim.u_limit_v))
         ctrl = Ac @ ctrl + Bc[:, 0] * e
         kf.predict(u=np.array([[u]]))
         if setup.nonlinear:
-            radial_axis_loop._rk4_step(plant, u, disturbance[k], physics, T, *scratch)
+            radial_axis_loop.rk4_step(plant, u, disturbance[k], physics, T, *scratch)
         else:
             plant = A4 @ plant + Bu4 * u + Bf4 * disturbance[k]
         if setup.sensor_lag_s <= 0:
@@ -79,7 +79,7 @@ def _throughput(seconds: float, threads: int, repeats: int = 7) -> tuple[float, 
     that run (about ``threads`` when the loops really run in parallel), and the
     simulated seconds per CPU second (best of ``repeats``: what one core buys,
     whatever else the machine runs)."""
-    sims = [_simulation(seed=s) for s in range(threads)]
+    sims = [benchmark_simulation(seed=s) for s in range(threads)]
     for sim in sims:
         sim.advance(100)                                   # compile / warm up
     n_steps = int(seconds / sims[0].sample_time_s)
@@ -121,7 +121,7 @@ def run(seconds: float = 2.0) -> dict:
     single, _, single_per_cpu_second = _throughput(seconds, 1)
     parallel, cpu_per_wall, _ = _throughput(seconds, 2)
     n_ref = 4000
-    reference_sim, compiled_sim = _simulation(seed=7), _simulation(seed=7)
+    reference_sim, compiled_sim = benchmark_simulation(seed=7), benchmark_simulation(seed=7)
     start = time.perf_counter()
     reference = filterpy_loop(reference_sim, n_ref)
     filterpy_speed = n_ref * reference_sim.setup.rig.sample_time_s / (time.perf_counter() - start)

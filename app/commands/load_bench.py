@@ -7,9 +7,13 @@ arrays), sends a camera message on connect and every few seconds, and moves
 the position-noise slider every few seconds.  Clients are added in steps up
 to N; at each step every tab's scope updates per second, bytes per second and
 the server's CPU time (all its processes, HAProxy included, from ``/proc``)
-are measured over a fixed window.  The largest step at which every tab still
-gets ``MIN_UPDATES_PER_S`` scope updates per second is the capacity.  The run
-stops at the first step that fails, so it is bounded in time.
+are measured over a fixed window, and every tab that stalled in it is named with
+the reason (``Tab.stall``: no scope update for more than ``STALL_S``, and whether
+any other message came meanwhile, or the connection ended: closed by the server
+with its close code, lost, or a frame the tab could not read).  The largest step
+at which every tab still gets ``MIN_UPDATES_PER_S`` scope updates per second and
+none stalled is the capacity.  The run stops at the first step that fails, so it
+is bounded in time.
 
 ``--breakdown`` also attributes the received bytes to message kinds (scope
 chart data, readouts, 3D view, ...).
@@ -19,6 +23,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import itertools
 import json
 import os
 import random
@@ -54,6 +59,7 @@ SETTLE_MAX_S = 90.0                           # ... and until every tab streams 
 SLIDER_LABEL = "Position sensor noise"
 SLIDER_VALUES = (1.33, 2.0)
 WORKER_HEADER = "X-Lab-Worker"                # set by the generated HAProxy configuration
+STALL_S = 2.0                                 # a tab with no scope update for longer than this has stalled
 #: An analysis readout of kalman_noise that a move of the position-noise slider changes: the time from a
 #: move to its new value in the tab is the slider-to-readout latency (the scope-window rows change anyway)
 READOUT_ROW = re.compile(r"RMS displacement, measured feedback \| *([^|]+?) *\|")
@@ -73,6 +79,13 @@ def decode_frame(frame: bytes) -> tuple[list[dict], list[int], int]:
     inner = zstandard.ZstdDecompressor().decompress(frame[16:16 + compressed_len], max_output_size=raw_len)
     payload = msgspec.msgpack.decode(inner)
     return payload["messages"], list(payload["binaryBufferLengths"]), compressed_len
+
+
+def _closing(error: websockets.ConnectionClosed) -> str:
+    """Who closed the connection, with which code and reason."""
+    if error.rcvd is not None:
+        return f"closed by server with code {error.rcvd.code}" + (f" ({error.rcvd.reason})" if error.rcvd.reason else "")
+    return "connection lost without a close frame"
 
 
 def _binary_bytes(value, lengths: list[int]) -> int:
@@ -103,6 +116,8 @@ class Tab:
     worker: str | None = None
     connected: bool = False
     closed: str | None = None                 # why the connection ended
+    ended_at: float | None = None             # when it ended before the bench stopped it
+    frame_times: list[float] = field(default_factory=list)   # arrival of every frame (any message)
     scope_uuid: str | None = None
     answers: list = field(default_factory=list)               # replies due to the lab's requests
     moved_at: float | None = None             # the newest slider move whose readout has not come yet
@@ -131,6 +146,7 @@ class Tab:
 
     def receive(self, frame: bytes, now: float) -> None:
         self.received_bytes += len(frame)
+        self.frame_times.append(now)
         messages, lengths, compressed = decode_frame(frame)
         sizes = [len(msgspec.msgpack.encode(m)) for m in messages] if self.breakdown else None
         total = sum(sizes) if sizes else 0
@@ -142,7 +158,7 @@ class Tab:
             if (message["type"] == "GuiUpdateMessage" and message["uuid"] == self.scope_uuid
                     and "data" in message["updates"]):
                 self.scope_times.append(now)
-            self._read_readout(message, now)
+            self.read_readout(message, now)
             if self.breakdown:
                 share = compressed * sizes[index] / total if total else 0.0
                 self.kind_bytes[kind] += share + _binary_bytes(message, lengths)
@@ -150,7 +166,7 @@ class Tab:
         if self.breakdown:
             self.kind_bytes["frame headers and padding"] += len(frame) - compressed - sum(lengths)
 
-    def _read_readout(self, message: dict, now: float) -> None:
+    def read_readout(self, message: dict, now: float) -> None:
         content = (message.get("updates") or message.get("props") or {}).get("_markdown")   # viser's name
         found = READOUT_ROW.search(content) if isinstance(content, str) else None
         if found is None or found.group(1) == self.readout:
@@ -164,7 +180,7 @@ class Tab:
         """Slider-to-readout latencies [s] of the readouts that arrived in [start, end)."""
         return [latency for arrival, latency in self.latencies if start <= arrival < end]
 
-    async def _inputs(self, connection, stop: asyncio.Event) -> None:
+    async def _inputs(self, outbox: asyncio.Queue, stop: asyncio.Event) -> None:
         """A camera message at once and then, like a student, every few seconds a camera
         message, and every third time also a slider move."""
         turn = 0
@@ -175,15 +191,20 @@ class Tab:
                       "position": [0.3 + angle, 0.3, 0.3], "fov": 1.0, "near": 0.01, "far": 100.0,
                       "image_height": 768, "image_width": 386, "look_at": [0.0, 0.0, 0.0],
                       "up_direction": [0.0, 0.0, 1.0]}
-            await connection.send(msgspec.msgpack.encode(camera))
+            outbox.put_nowait(camera)
             if self.slider is not None and self.slider_every and turn % self.slider_every == self.slider_every - 1:
-                move = {"type": "GuiUpdateMessage", "uuid": self.slider,
-                        "updates": {"value": SLIDER_VALUES[turn // self.slider_every % 2]}}
-                await connection.send(msgspec.msgpack.encode(move))
+                outbox.put_nowait({"type": "GuiUpdateMessage", "uuid": self.slider,
+                                   "updates": {"value": SLIDER_VALUES[turn // self.slider_every % 2]}})
                 self.moved_at = time.perf_counter()
             turn += 1
             with contextlib.suppress(asyncio.TimeoutError):
                 await asyncio.wait_for(stop.wait(), CAMERA_PERIOD_S * random.uniform(0.8, 1.2))
+
+    async def _write(self, connection, outbox: asyncio.Queue) -> None:
+        """The tab's only writer: like a browser, whose socket sends never hold up its reading,
+        the reader only queues its answers here."""
+        while True:
+            await connection.send(msgspec.msgpack.encode(await outbox.get()))
 
     async def run(self, stop: asyncio.Event) -> None:
         try:
@@ -192,7 +213,9 @@ class Tab:
                     open_timeout=60) as connection:
                 self.connected = True
                 self.worker = connection.response.headers.get(WORKER_HEADER)
-                inputs = asyncio.create_task(self._inputs(connection, stop))
+                outbox: asyncio.Queue = asyncio.Queue()
+                helpers = [asyncio.create_task(self._inputs(outbox, stop)),
+                           asyncio.create_task(self._write(connection, outbox))]
                 try:
                     while not stop.is_set():
                         try:
@@ -201,14 +224,50 @@ class Tab:
                             continue
                         self.receive(frame, time.perf_counter())
                         while self.answers:
-                            await connection.send(msgspec.msgpack.encode(self.answers.pop(0)))
+                            outbox.put_nowait(self.answers.pop(0))
+                        if helpers[1].done():                # the writer failed: its error ends the tab
+                            helpers[1].result()
                 finally:
-                    inputs.cancel()
-                    with contextlib.suppress(asyncio.CancelledError, websockets.ConnectionClosed):
-                        await inputs
+                    for helper in helpers:
+                        helper.cancel()
+                    await asyncio.gather(*helpers, return_exceptions=True)
                 self.closed = "stopped"
+        except websockets.ConnectionClosed as error:
+            self._ended(_closing(error))
         except (TimeoutError, OSError, websockets.WebSocketException) as error:
-            self.closed = f"{type(error).__name__}: {error}"
+            self._ended(f"connection error: {type(error).__name__}: {error}")
+        except Exception as error:  # noqa: BLE001 - a frame the tab could not read ends it, with the reason
+            self._ended(f"reader exception: {type(error).__name__}: {error}")
+
+    def _ended(self, why: str) -> None:
+        self.closed, self.ended_at = why, time.perf_counter()
+
+    def longest_gap(self, start: float, end: float) -> tuple[float, float, float]:
+        """(seconds, start, end) of the longest time without a scope update in [start, end)."""
+        arrivals = [start] + [t for t in self.scope_times if start <= t < end] + [end]
+        return max((b - a, a, b) for a, b in itertools.pairwise(arrivals))
+
+    def stall(self, start: float, end: float, limit_s: float = STALL_S) -> str | None:
+        """Why the tab stalled in [start, end): it ended early, or no scope update came for more
+        than ``limit_s`` (then whether any message came in the longest such gap, and whether the
+        gap lasted to the end: a silent connection, not a slow server); None if it did not."""
+        if self.ended_at is not None and self.ended_at < end:
+            return self.closed
+        gap_s, gap_start, gap_end = self.longest_gap(start, end)
+        if gap_s <= limit_s:
+            return None
+        frames = sum(gap_start < t < gap_end for t in self.frame_times)
+        until = " until the end of the window" if gap_end == end else ""   # else it streamed again
+        why = (f"messages but no scope update for {gap_s:.1f} s{until} ({frames} frames)" if frames
+               else f"no message at all for {gap_s:.1f} s{until}")
+        if gap_start > start:
+            return why
+        before = [t for t in self.scope_times if t < start]        # the window began in the gap
+        last_frame = max((t for t in self.frame_times if t < start), default=None)
+        if not before:
+            return why + f"; no scope update since it opened ({len(self.frame_times)} frames in all)"
+        return why + (f"; before the window {len(before)} scope updates, the last {start - before[-1]:.1f} s "
+                      f"before it, the last message {start - last_frame:.1f} s before it")
 
     def rate(self, start: float, end: float) -> float:
         """Scope updates per second in [start, end)."""
@@ -305,10 +364,11 @@ class Step:
     updates: int                  # scope updates received by all tabs in the window
     window_s: float
     readout_latencies_s: list[float] = field(default_factory=list)   # slider move -> new readout, all tabs
+    stalls: list[dict] = field(default_factory=list)   # tab (1 = the first connected), worker, why (Tab.stall)
 
     @property
     def ok(self) -> bool:
-        return self.connected == self.clients and self.updates_min >= MIN_UPDATES_PER_S
+        return self.connected == self.clients and self.updates_min >= MIN_UPDATES_PER_S and not self.stalls
 
     def row(self) -> dict:
         return {"clients": self.clients, "updates_per_s_min": round(self.updates_min, 1),
@@ -325,6 +385,7 @@ class Step:
                 "readout_latency_s_median": _rounded(statistics.median(self.readout_latencies_s)
                                                      if self.readout_latencies_s else None),
                 "readout_latency_s_max": _rounded(max(self.readout_latencies_s, default=None)),
+                "stalled_tabs": len(self.stalls), "stalls": self.stalls,
                 "connected": self.connected, "ok": self.ok}
 
 
@@ -356,7 +417,9 @@ async def _measure(url: str, steps: list[int], window_s: float, server_pid: int,
                         max(rates_bytes), server_cpu / (end - start), own_cpu / (end - start),
                         sum(t.connected and t.closed is None for t in tabs),
                         sum(round(r * (end - start)) for r in rates), end - start,
-                        [x for t in tabs for x in t.latencies_in(start, end)])
+                        [x for t in tabs for x in t.latencies_in(start, end)],
+                        [{"tab": number, "worker": t.worker, "why": why}
+                         for number, t in enumerate(tabs, 1) if (why := t.stall(start, end))])
             results.append(step)
             report(step)
             if not step.ok and not all_steps:
@@ -436,7 +499,11 @@ def main(clients: int, workers: int, steps: int, window_s: float, exercise: str,
                   + (f"; slider move to readout: median {r['readout_latency_s_median']:.2f} s, "
                      f"max {r['readout_latency_s_max']:.2f} s ({r['slider_moves_answered']} moves)"
                      if r["slider_moves_answered"] else "")
+                  + f"; stalled tabs: {r['stalled_tabs']}"
                   + ("" if step.ok else "  <- below target"), flush=True)
+            for stall in r["stalls"]:
+                print(f"         tab {stall['tab']} ({stall['worker'] or 'one process'}) stalled: {stall['why']}",
+                      flush=True)
 
     if not as_json:
         moves = f"a slider move every ~{CAMERA_PERIOD_S * slider_every:.0f} s" if slider_every else "no slider moves"
@@ -450,7 +517,7 @@ def main(clients: int, workers: int, steps: int, window_s: float, exercise: str,
     if as_json:
         print(json.dumps(result, indent=2))
     else:
-        print(f"largest step with every tab >= {MIN_UPDATES_PER_S:.0f} scope updates/s: "
+        print(f"largest step with every tab >= {MIN_UPDATES_PER_S:.0f} scope updates/s and none stalled: "
               f"{result['largest_clients_at_min_updates']} tabs")
         if "bytes_by_kind_per_tab_run" in result:
             print("bytes per tab by message kind (" + result["breakdown_note"] + "):")

@@ -29,6 +29,7 @@ import traceback
 from pathlib import Path
 
 from app.commands.headless import jsonable
+from lab_modules.claims import format_value
 from lab_modules.evaluation.measured_claims import (
     DEVIATION,
     FAIL,
@@ -40,6 +41,7 @@ from lab_modules.evaluation.measured_claims import (
     measure,
 )
 from lab_modules.exercises import Exercise, get, registry
+from lab_modules.formatting import NOT_A_NUMBER
 from lab_modules.parameters import ParameterError
 
 FIGURE_DPI = 100
@@ -48,8 +50,21 @@ FIGURE_DPI = 100
 COLUMNS = ("exercise", "source", "quantity", "paper", "lab", "accepted", "status")
 
 
+def lab_text(row: Row) -> str:
+    """Seed 0's value with its unit and, where the seeds differ, their range: each value with the
+    digits that place it inside or outside the accepted range as the verdict does; "—" where the
+    metric could not be measured (the reason says why)."""
+    if row.value is None:
+        return NOT_A_NUMBER
+    text = row.claim.value_text(row.value)
+    if len(row.values) > 1 and min(row.values) != max(row.values):
+        low, high = (format_value(value, row.claim.accept) for value in (min(row.values), max(row.values)))
+        text += f" ({low} … {high})"
+    return text
+
+
 def _cells(row: Row) -> tuple[str, ...]:
-    return (row.exercise, row.claim.source, row.quantity_text(), row.claim.paper, row.lab_text(),
+    return (row.exercise, row.claim.source, row.quantity_text(), row.claim.paper, lab_text(row),
             row.claim.accept_text(), row.status)
 
 

@@ -16,6 +16,10 @@ and hands every one to its handlers (GUI updates become thread-pool jobs).
 
 The origin check needs the websocket's request headers: ``headers`` finds
 them by client id.
+
+``wake_on_the_loop`` (before the server starts) mends viser's other direction: a tab's
+outgoing messages are pushed by the frame and analysis threads, and the wake-up of the
+connection's writer could be lost for good (``LoopSideEvent``).
 """
 
 from __future__ import annotations
@@ -31,6 +35,7 @@ import msgspec
 import viser
 import viser.infra._infra as infra
 from viser import _messages
+from viser.infra._async_message_buffer import AsyncMessageBuffer
 
 #: A control's updates are acted on at most once per this interval [s] (newest value wins).
 COALESCE_S = 0.02
@@ -260,6 +265,43 @@ async def _consumer(websocket, handle_message: Callable, message_class) -> None:
             await asyncio.sleep(-allowance / LOOP_SHARE)
         elif count % YIELD_EVERY == 0:
             await asyncio.sleep(0)
+
+
+class LoopSideEvent(asyncio.Event):
+    """The wake-up of a connection's writer (viser's ``AsyncMessageBuffer.message_event``),
+    changed only on its event loop.
+
+    viser's ``push`` runs on the thread that sends (a frame thread) and sets the event twice:
+    directly, then on the loop through ``call_soon_threadsafe`` (or at the end of the atomic
+    block, ``atomic_end``).  The direct set races with ``Event.wait`` on the loop, which checks
+    the flag and then registers its waiter: a set from another thread in between (a GIL switch
+    there) raises the flag and wakes no one, the loop-side set then finds the flag raised and
+    does nothing, and the writer sleeps for good with its tab's messages piling up: the tab gets
+    nothing more while its websocket stays open.  Only the loop-side set is kept; viser makes it
+    for every push (``tests/test_traffic.py`` holds it to that)."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop):
+        super().__init__()
+        self.owner = loop
+
+    def set(self) -> None:
+        if asyncio.events._get_running_loop() is self.owner:
+            super().set()
+
+
+def wake_on_the_loop() -> None:
+    """Every message buffer viser makes from now on wakes its writer on the event loop only
+    (``LoopSideEvent``); call before the server is made (its broadcast buffer is made then)."""
+    if getattr(AsyncMessageBuffer.__init__, "wakes_on_the_loop", False):
+        return
+    made = AsyncMessageBuffer.__init__
+
+    def __init__(self, *args, **kwargs) -> None:
+        made(self, *args, **kwargs)
+        self.message_event = LoopSideEvent(self.event_loop)
+
+    __init__.wakes_on_the_loop = True
+    AsyncMessageBuffer.__init__ = __init__
 
 
 def callback(function: Callable) -> Callable:

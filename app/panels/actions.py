@@ -16,25 +16,15 @@ import time
 import traceback
 from collections.abc import Callable, Iterator
 
-import numpy as np
-
 from lab_modules.exercises import Action, Analysis, Plot
+from lab_modules.formatting import number
 
 PLOT_ASPECT = 1.6                 # result plots in the 380 px control panel
+RESULT_DIGITS = 4                 # one more than a readout: a Monte-Carlo ratio of 1.004 is not 1
 
 
 def _steps(result: Analysis | Iterator[Analysis]) -> Iterator[Analysis]:
     return iter((result,)) if isinstance(result, Analysis) else result
-
-
-def _number(value: float | str) -> str:
-    if isinstance(value, str):                        # a word instead of a number ("touched down")
-        return value
-    if isinstance(value, (int, np.integer)):
-        return str(value)
-    if not np.isfinite(value):
-        return "…" if np.isnan(value) else str(value)
-    return f"{value:.4g}"
 
 
 def result_markdown(result: Analysis, running: bool) -> str:
@@ -42,7 +32,8 @@ def result_markdown(result: Analysis, running: bool) -> str:
     lines = []
     if result.readouts:
         lines += ["| quantity | value | unit |", "|---|---:|---|"]
-        lines += [f"| {label} | {_number(value)} | {unit} |" for label, value, unit in result.readouts]
+        lines += [f"| {label} | {number(value, RESULT_DIGITS)} | {unit} |"
+                  for label, value, unit in result.readouts]
     notes = list(result.notes)
     if running and notes:
         notes[0] = f"⏳ **{notes[0]}**"

@@ -6,7 +6,8 @@ Shown for every exercise whose simulation offers ``filter_state()`` (see
 the correlations P_ij / (σ_i σ_j), the gain K (state per measurement unit) and
 each measurement's innovation ν with its predicted σ = √S_jj and their ratio
 (|ν/√S| above 3 is a rare event for a consistent filter).  Numbers are shown
-with an SI prefix chosen per row, so x̂ and its σ share one unit.
+with an SI prefix chosen per row, so x̂ and its σ share one unit, in the lab's
+one number format (``lab_modules.formatting``) with 4 significant digits.
 """
 
 from __future__ import annotations
@@ -16,9 +17,12 @@ import math
 import numpy as np
 import viser
 
+from lab_modules.formatting import number, signed
+
 PREFIXES = ((1e9, "G"), (1e6, "M"), (1e3, "k"), (1.0, ""), (1e-3, "m"), (1e-6, "µ"), (1e-9, "n"), (1e-12, "p"))
-#: units an SI prefix can go in front of (others, and pure numbers, are shown in powers of ten)
+#: units an SI prefix can go in front of (others, and pure numbers, keep their unit)
 PREFIXABLE = ("m", "m/s", "A", "V", "N", "N/A", "N/m", "H", "s")
+DIGITS = 4                        # one more than a readout: a filter is debugged digit by digit
 RUNNING_NOTE = "*Pause the simulation (or press Step) to inspect the filter at one sample.*"
 
 
@@ -35,14 +39,6 @@ def prefixed(scale_of: float, unit: str) -> tuple[float, str]:
         if abs(scale_of) >= factor * 0.9995:
             return factor, prefix + unit
     return PREFIXES[-1][0], PREFIXES[-1][1] + unit
-
-
-def number(value: float) -> str:
-    if not np.isfinite(value):
-        return "—"
-    if value != 0 and not 1e-3 <= abs(value) < 1e5:
-        return f"{value:.3e}"
-    return f"{value:.4g}"
 
 
 def symbol(label: str) -> str:
@@ -75,14 +71,15 @@ def markdown(state: dict | None, sample_time_s: float) -> str:
              "| state | x̂ | ±σ = √P_ii | unit |", "|---|---:|---:|---|"]
     for (label, unit), value, s in zip(state["states"], x, sigma):
         factor, shown = prefixed(max(abs(value), s), unit)
-        lines.append(f"| {label} | {number(value / factor)} | {number(s / factor)} | {shown} |")
+        lines.append(f"| {label} | {number(value / factor, DIGITS)} | {number(s / factor, DIGITS)} "
+                     f"| {shown} |")
     names = [symbol(label) for label, _ in state["states"]]
     with np.errstate(divide="ignore", invalid="ignore"):
         rho = P / np.outer(sigma, sigma)
     lines += ["", "Correlations ρ_ij = P_ij / (σ_i σ_j):", "",
               "| ρ | " + " | ".join(names) + " |", "|---|" + "---:|" * len(names)]
     for name, row in zip(names, rho):
-        lines.append(f"| {name} | " + " | ".join("—" if not np.isfinite(r) else f"{r:+.2f}" for r in row) + " |")
+        lines.append(f"| {name} | " + " | ".join(signed(r) for r in row) + " |")
     if state.get("K") is None:
         lines += ["", "*This filter corrects continuously (no per-sample gain or innovation).*"]
         return "\n".join(lines)
@@ -91,14 +88,16 @@ def markdown(state: dict | None, sample_time_s: float) -> str:
     lines += ["", "Kalman gain K (state change per unit of innovation):", "",
               "| K | " + " | ".join(label for label, _ in measurements) + " |", "|---|" + "---:|" * len(measurements)]
     for (label, unit), row in zip(state["states"], K):
-        cells = [f"{number(gain / factor)} {shown}".strip() for gain, (_, y_unit) in zip(row, measurements)
+        cells = [f"{number(gain / factor, DIGITS)} {shown}".strip()
+                 for gain, (_, y_unit) in zip(row, measurements)
                  for factor, shown in [gain_unit(gain, unit, y_unit)]]
         lines.append(f"| {symbol(label)} | " + " | ".join(cells) + " |")
     lines += ["", "| measurement | innovation ν | predicted σ = √S | ν/√S |", "|---|---:|---:|---:|"]
     for (label, unit), nu, s in zip(measurements, state["innovation"], state["innovation_sigma"]):
         factor, shown = prefixed(max(abs(nu), s), unit)
         ratio = nu / s if s > 0 else math.nan
-        lines.append(f"| {label} | {number(nu / factor)} {shown} | {number(s / factor)} {shown} | {ratio:+.2f} |")
+        lines.append(f"| {label} | {number(nu / factor, DIGITS)} {shown} "
+                     f"| {number(s / factor, DIGITS)} {shown} | {signed(ratio)} |")
     return "\n".join(lines)
 
 

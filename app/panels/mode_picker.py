@@ -11,12 +11,13 @@ a slider moves it.
 from __future__ import annotations
 
 from app.panels import pole_map
+from lab_modules.evaluation.poles import PoleView
 
 
 class ModePicker:
     """The dropdown and the mode's read-out; ``draw`` puts a pole view on the maps."""
 
-    def __init__(self, gui, plots, pole_view: pole_map.PoleView):
+    def __init__(self, gui, plots, pole_view: PoleView):
         self.plots, self.view, self.mode = plots, pole_view, None
         self.dropdown = gui.add_dropdown("Show mode", pole_map.mode_choices(pole_view),
                                          initial_value=pole_map.NO_MODE,
@@ -29,7 +30,7 @@ class ModePicker:
         self.mode = pole_map.chosen(self.view, choice)
         self._redraw()
 
-    def draw(self, pole_view: pole_map.PoleView) -> None:
+    def draw(self, pole_view: PoleView) -> None:
         """Show a new pole view (call with the GUI lock held, inside ``client.atomic``)."""
         self.view = pole_view
         self.mode = pole_map.follow(pole_view, self.mode)

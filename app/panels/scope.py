@@ -23,6 +23,8 @@ import time
 import numpy as np
 import viser
 
+from lab_modules.formatting import SUPERSCRIPT
+
 SHRINK_AFTER_S = 3.0          # a range three times too large for this long shrinks
 HEADROOM = 1.2                # the range covers the traces with this factor
 PADDING = (12, 16, 0, 4)      # top, right, bottom, left [px]: the top tick label stays inside the chart
@@ -153,7 +155,6 @@ def chart_options(x_label: str, y_label: str) -> dict:
             "padding": PADDING}
 
 
-_SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
 
 
 def decade_label(exponent: int) -> str:
@@ -161,7 +162,7 @@ def decade_label(exponent: int) -> str:
     numbers keep three decimals, so every decade below 0.001 read "0")."""
     if -3 <= exponent <= 3:
         return f"{10.0 ** exponent:.{max(-exponent, 0)}f}"
-    return "10" + str(exponent).translate(_SUPERSCRIPT)
+    return "10" + str(exponent).translate(SUPERSCRIPT)
 
 
 def log_axis(low: float, high: float) -> dict:

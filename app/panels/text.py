@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import re
 
-import numpy as np
+from lab_modules.formatting import number
 
-SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
+#: A readout's value as a student reads it (3 significant digits, thousands grouped up to 10⁹,
+#: powers of ten beyond, "—" for NaN, a word as it is): the lab's one number format.
+readout = number
 
 
 def escaped(text) -> str:
@@ -20,24 +22,6 @@ def escaped(text) -> str:
 def cell(text: str) -> str:
     """A readout's label or unit as one Markdown table cell: "|S|max" must not end the cell."""
     return str(text).replace("|", "\\|")
-
-
-def readout(value: float | str) -> str:
-    """A readout's value as a student reads it: 3 significant digits, thousands grouped up to 10⁹
-    ("480 000"), powers of ten written out beyond ("7.5·10⁻⁸"), a word as it is ("touched down")."""
-    if isinstance(value, str):                        # a word instead of a number
-        return value
-    if np.isnan(value):
-        return "—"
-    if np.isinf(value):
-        return "∞ (unstable)"
-    if 1e3 <= abs(value) < 1e9:
-        return f"{float(f'{value:.4g}'):,.0f}".replace(",", "\u202f")   # narrow no-break space
-    text = f"{value:.3g}"
-    if "e" in text:
-        mantissa, exponent = text.split("e")
-        return f"{mantissa}·10{str(int(exponent)).translate(SUPERSCRIPT)}"
-    return text
 
 
 LIVE_SUFFIX = " (scope window)"   # marks the readouts an exercise computes from the scope window

@@ -14,13 +14,14 @@ import time
 import traceback
 from collections.abc import Callable, Iterator
 
-from app.panels import margins, mode_picker, pole_map
+from app.panels import mode_picker, pole_map
 from app.panels.plots import AnalysisPlots
 from app.panels.readouts import grouped_markdown, pinned_markdown
 from app.panels.text import readout_rows
 from app.tab.state import LabState
 from app.tab.turns import Turns
 from app.tab.worker import TabWorker
+from lab_modules.evaluation import margins, poles
 from lab_modules.exercises import Analysis, Exercise
 
 #: The process's analyses take turns (app/tab/turns.py): one at a time shares the interpreter with streaming.
@@ -54,8 +55,8 @@ class AnalysisView:
         self.turn_wake = threading.Event()        # this tab's place in line for an analysis turn
         self.thread: threading.Thread | None = None
         self.shown_analysis: Analysis | None = None   # the last shown, redrawn with fresh scope readouts
-        self.shown_margins: tuple = ([], [], [])
-        self.shown_poles: pole_map.PoleView | None = None
+        self.shown_margins = margins.MarginView([], [], [])
+        self.shown_poles: poles.PoleView | None = None
         self.readouts = None
         self.pinned = None                        # the key readouts, above the scope's charts
         self.plots: AnalysisPlots | None = None
@@ -79,7 +80,7 @@ class AnalysisView:
 
     def add_pole_map(self, gui, exercise: Exercise, values: dict, first: Analysis, on) -> None:
         """The Pole map tab: both maps, the mode picker, the legend and the table."""
-        self.shown_poles = pole_map.view(exercise, dict(values), first.poles)
+        self.shown_poles = poles.view(exercise, dict(values), first.poles)
         plots = tuple(gui.add_uplot(data, **options, aspect=1.6)
                       for data, options in pole_map.charts(self.shown_poles))
         self.mode_picker = mode_picker.ModePicker(gui, plots, self.shown_poles)
@@ -172,15 +173,15 @@ class AnalysisView:
             self.client.flush()                       # the readouts go out now, not with the next window
             self.plots.update(result.plots)
             exercise, values = self.state.exercise, self.state.values_now()
-        poles = pole_map.view(exercise, values, result.poles)   # the root locus: cached per setting
+        pole_view = poles.view(exercise, values, result.poles)   # the root locus: cached per setting
         with self.gui_lock:
             if not self.is_current(generation):
                 return False
-            if not poles.same_as(self.shown_poles):
-                self.shown_poles = poles
+            if not pole_view.same_as(self.shown_poles):
+                self.shown_poles = pole_view
                 with self.client.atomic():            # series, axes and data change together
-                    self.mode_picker.draw(poles)
-                    self.pole_table.content = pole_map.table_markdown(poles)
+                    self.mode_picker.draw(pole_view)
+                    self.pole_table.content = pole_map.table_markdown(pole_view)
         return True
 
     # -- readouts ------------------------------------------------------------------------

@@ -31,7 +31,7 @@ class Turns:
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
-        self._waiting: collections.deque[threading.Event] = collections.deque()
+        self.waiting_line: collections.deque[threading.Event] = collections.deque()   # wake events, in order
         self._held = False
 
     @contextlib.contextmanager
@@ -47,8 +47,8 @@ class Turns:
             yield True
         finally:
             with self._lock:
-                if self._waiting:
-                    self._waiting.popleft().set()     # still held: it changes hands
+                if self.waiting_line:
+                    self.waiting_line.popleft().set()     # still held: it changes hands
                 else:
                     self._held = False
 
@@ -58,13 +58,13 @@ class Turns:
             if not self._held:
                 self._held = True
                 return True
-            self._waiting.append(wake)
+            self.waiting_line.append(wake)
         while True:
             with self._lock:
                 wake.clear()                          # before the checks: a later set is not lost
-                if wake not in self._waiting:         # handed on to this thread
+                if wake not in self.waiting_line:         # handed on to this thread
                     return True
                 if abandon():
-                    self._waiting.remove(wake)
+                    self.waiting_line.remove(wake)
                     return False
             wake.wait()

@@ -5,14 +5,29 @@ e [V] (reference minus fed-back position, in sensor volts) to the amplifier
 reference i_ref [V] (paper 000, §IV); ``setpoint_filter`` is the reference
 filter that makes it an I-PD.  The simulation kernels only ever see
 matrices, so any discrete SISO controller (PID, lead-lag, the integral part
-of an LQG) plugs into the same loop; ``controller_step`` is their compiled
-step.
+of an LQG) plugs into the same loop: a kernel takes it as a
+``DiscreteController`` bundle and steps it with ``controller_step``.
 """
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import control
 import numba
+import numpy as np
+
+
+class DiscreteController(NamedTuple):
+    """A discrete SISO controller as the compiled loops take it (stepped by ``controller_step``):
+    ctrl_{k+1} = A ctrl_k + B e_k,  u_k = C ctrl_k + D e_k, with e and u in the loop's
+    units (bearing loops: e [V] -> i_ref [V]; maglev lead-lag: e [m] -> coil voltage [V])."""
+
+    state: np.ndarray   # (n_c,) controller state ctrl, advanced in place [the realisation's own units]
+    A: np.ndarray       # (n_c, n_c) state matrix [-]
+    B: np.ndarray       # (n_c, 1) input column [state per unit of e]
+    C: np.ndarray       # (1, n_c) output row [unit of u per state]
+    D: np.ndarray       # (1, 1) feedthrough [unit of u per unit of e]
 
 
 def pid(gain: float, integral_time_s: float, derivative_time_s: float,
@@ -78,7 +93,9 @@ def controller_step(e, offset_v, u_limit, ctrl, Ac, Bc, Cc, Dc, work):
     ctrl <- Ac ctrl + Bc e in place (``work``: scratch of ctrl's size).  The
     offset carries what the loop adds to the controller: a state feedback
     -K_s x_hat (eq. 22), a feedforward or an operating point.  Inlined into
-    the caller, so it is compiled with the caller's options."""
+    the caller, so it is compiled with the caller's options.  The arrays come in
+    one by one: a kernel reads them out of its ``DiscreteController`` once, before its
+    loop (an array read out of a bundle inside the loop costs a reference count per sample)."""
     n_c = ctrl.shape[0]
     u = Dc[0, 0] * e + offset_v
     for r in range(n_c):

@@ -40,6 +40,8 @@ small dt.  This is the lab's reading of why the paper dropped the filter
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 
@@ -194,9 +196,29 @@ OBSERVER_COLUMNS = ("x_estimated_m", "velocity_estimated_m_per_s", "current_esti
                     "innovation_m", "innovation_sigma_m", "nis")
 
 
+class RecordedSamples(NamedTuple):
+    """A recording as ``run_observer`` reads it."""
+
+    time_s: np.ndarray       # (n,) sample times t_k [s]
+    measured_m: np.ndarray   # (n,) measured gap y_k [m]
+    voltage_v: np.ndarray    # (n,) coil voltage u_k [V], held until t_{k+1}
+
+
+class ObserverFilter(NamedTuple):
+    """The continuous-discrete EKF's arrays as ``run_observer`` takes them; states (x1 [m], x2 [m/s], x3 [A])."""
+
+    x_hat: np.ndarray      # (3,) estimate, in place [m, m/s, A]
+    P: np.ndarray          # (3, 3) error covariance, in place [state unit x state unit]
+    Q: np.ndarray          # (3, 3) process noise spectral densities [m²/s, m²/s³, A²/s on the diagonal]
+    R_m2: float            # measurement variance r [m²]
+    constants: np.ndarray  # (5,) the model's m [kg], L_c [H], R_c [Ω], C [N m²/A²], g [m/s²]
+    substeps: int          # RK4 steps per sample interval of the propagation
+
+
 @numba.njit(**_JIT)
-def run_observer(time_s, measured_m, voltage_v, x, P, Q, r, p, n_substeps, out, priors):
-    """The continuous-discrete EKF as a pure observer of a recording (§3.5, Fig. 3.23).
+def run_observer(samples, ekf, out, priors):
+    """The continuous-discrete EKF (an ``ObserverFilter``) as a pure observer of a recording
+    (``RecordedSamples``; §3.5, Fig. 3.23).
 
     At each sample k: keep the prior (x⁻ in ``priors[k, :3]``, P⁻ row by row in
     ``priors[k, 3:]``; the filter inspector redoes the correction from it),
@@ -204,6 +226,8 @@ def run_observer(time_s, measured_m, voltage_v, x, P, Q, r, p, n_substeps, out, 
     propagate to t_{k+1} with the recorded voltage u_k held (eq. 2.43-2.45).
     Returns the number of rows written (fewer than the samples if the estimate
     stops being finite)."""
+    time_s, measured_m, voltage_v = samples.time_s, samples.measured_m, samples.voltage_v
+    x, P, Q, r, p = ekf.x_hat, ekf.P, ekf.Q, ekf.R_m2, ekf.constants
     gain = np.empty(3)
     n = time_s.shape[0]
     for k in range(n):
@@ -222,5 +246,5 @@ def run_observer(time_s, measured_m, voltage_v, x, P, Q, r, p, n_substeps, out, 
                 and x[0] > 0.0):
             return k
         if k + 1 < n:
-            propagate(x, P, voltage_v[k], p, Q, time_s[k + 1] - time_s[k], n_substeps)
+            propagate(x, P, voltage_v[k], p, Q, time_s[k + 1] - time_s[k], ekf.substeps)
     return n

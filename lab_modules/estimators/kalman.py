@@ -21,6 +21,8 @@ matrix inverse.  For each row c of C with variance r::
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 
@@ -122,6 +124,21 @@ def update(x, P, C, y, R_diag, gain, n_states):
     return nis
 
 
+class LinearFilter(NamedTuple):
+    """The arrays of a linear Kalman filter (eq. 1, 2) as the compiled loops take them,
+    padded to ``STATE_SIZE`` states (``KalmanFilter.arrays``).  Units are the model's:
+    states (x [m], v [m/s], i [A], x_d [m]) on the bearing axis, (x [m], v [m/s]) on the
+    thrust collar; measurements y in sensor volts [V] or metres [m]."""
+
+    x_hat: np.ndarray   # (STATE_SIZE,) estimate, corrected and predicted in place [state units]
+    P: np.ndarray       # (STATE_SIZE, STATE_SIZE) error covariance, in place [state unit x state unit]
+    A: np.ndarray       # (STATE_SIZE, STATE_SIZE) discrete state matrix [state unit per state unit]
+    B: np.ndarray       # (STATE_SIZE,) column of the control input u [state unit per unit of u]
+    C: np.ndarray       # (n_y, STATE_SIZE) measurement matrix [unit of y per state unit]
+    Q: np.ndarray       # (STATE_SIZE, STATE_SIZE) process-noise covariance per sample [state units²]
+    R_diag: np.ndarray  # (n_y,) measurement-noise variances [unit of y²]
+
+
 class KalmanFilter:
     """Linear Kalman filter of eq. 2 with a diagonal measurement covariance.
 
@@ -143,27 +160,31 @@ class KalmanFilter:
         self.A, self.B, self.C = pad_square(A), pad_vector(B), pad_columns(C)
         self.Q, self.P = pad_square(Q), pad_square(P0)
         self.R_diag = np.ascontiguousarray(R_diag, dtype=float).ravel()
-        self._x = pad_vector(x0)
+        self.state = pad_vector(x0)       # the estimate padded to STATE_SIZE, as the compiled steps read it
         self.gain = np.zeros((self.C.shape[0], STATE_SIZE))   # row j: gain of measurement j
         self._work_x, self._work_P = np.zeros(STATE_SIZE), np.zeros((STATE_SIZE, STATE_SIZE))
 
     @property
     def x(self) -> np.ndarray:
         """State estimate (a view of the model's states)."""
-        return self._x[: self.dim_x]
+        return self.state[: self.dim_x]
 
     @property
     def covariance(self) -> np.ndarray:
         """Error covariance P of the estimate (a view)."""
         return self.P[: self.dim_x, : self.dim_x]
 
+    def arrays(self) -> LinearFilter:
+        """The filter's arrays for a compiled loop (the same arrays: the loop updates this filter)."""
+        return LinearFilter(x_hat=self.state, P=self.P, A=self.A, B=self.B, C=self.C, Q=self.Q, R_diag=self.R_diag)
+
     def predict(self, u: float) -> None:
         """Prediction step of eq. 2 with control input u."""
-        predict(self._x, self.P, self.A, self.B, float(u), self.Q, self._work_x, self._work_P)
+        predict(self.state, self.P, self.A, self.B, float(u), self.Q, self._work_x, self._work_P)
 
     def update(self, y) -> None:
         """Correction step of eq. 2 with measurement vector y."""
-        update(self._x, self.P, self.C, np.asarray(y, dtype=float), self.R_diag, self.gain, STATE_SIZE)
+        update(self.state, self.P, self.C, np.asarray(y, dtype=float), self.R_diag, self.gain, STATE_SIZE)
 
 
 def pad_square(M) -> np.ndarray:

@@ -1,4 +1,5 @@
 """Headless evaluation of any exercise: what the lab measures about an exercise without
-drawing it (its claims measured per seed; pole sets and their categories, modes and
-their physical names, root loci, loop margins).  Above ``exercises``, below the app:
-pure data objects that ``app/panels`` draws and ``app/commands`` prints."""
+drawing it: its claims measured per seed (``measured_claims``), its pole sets with their
+declared categories, numbered modes and physical names (``poles``), root loci
+(``root_locus``) and loop margins (``margins``).  Above ``exercises``, below the app: pure
+data objects that ``app/panels`` draws and ``app/commands`` prints."""

@@ -49,17 +49,9 @@ class Row:
         if self.status == FAIL:
             bad = [v for v in self.values if not self.claim.holds(v)]
             seeds = "" if len(self.values) == 1 else f" on {len(bad)} of {len(self.values)} seeds"
-            return f"{format_value(bad[0])} outside {self.claim.accept_text()}{seeds}" + (
+            return f"{format_value(bad[0], self.claim.accept)} outside {self.claim.accept_text()}{seeds}" + (
                 f"; {self.claim.note}" if self.claim.deviation else "")
         return self.claim.note if self.claim.deviation else ""
-
-    def lab_text(self) -> str:
-        if self.value is None:
-            return "—"
-        text = f"{format_value(self.value)} {self.claim.unit}".strip()
-        if len(self.values) > 1 and min(self.values) != max(self.values):
-            text += f" ({format_value(min(self.values))} … {format_value(max(self.values))})"
-        return text
 
     def quantity_text(self) -> str:
         settings = settings_text(self.claim.settings)

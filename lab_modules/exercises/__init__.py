@@ -3,6 +3,7 @@ any of them generically (parameters, scope charts, pole map, readouts)."""
 
 from __future__ import annotations
 
+import enum
 import importlib
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -64,6 +65,16 @@ class Analysis:
     poles: dict[str, np.ndarray]                      # name -> continuous-equivalent poles [rad/s]
     notes: list[str] = field(default_factory=list)
     plots: list[Plot] = field(default_factory=list)
+
+
+class PoleCategory(enum.Enum):
+    """What a pole set of ``Analysis.poles`` is (``Exercise.pole_categories``): the pole map draws
+    each category in one colour in every exercise and lists the categories in this order."""
+
+    PLANT = "plant"                    # the plant, open loop (no feedback)
+    CLOSED_LOOP = "closed loop"        # plant, filter and controller together
+    FILTER_ERROR = "filter error"      # a filter's error dynamics (A − A K C), an adaptive weight's error
+    REGULATOR = "regulator"            # a state-feedback regulator (A − B K)
 
 
 @dataclass(frozen=True)
@@ -188,6 +199,12 @@ class Exercise:
         They must be affine in the factor (it scales the controller's output)."""
         raise NotImplementedError
 
+    def pole_categories(self, values: dict) -> dict[str, PoleCategory]:
+        """The category of each pole set ``analyse(values)`` reports in ``Analysis.poles``, by set
+        name: the set's colour on the pole map and its place in the table.  Every set an exercise
+        reports is declared (tested).  Default: none."""
+        return {}
+
     def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
         """Physical names of the poles of ``Analysis.poles`` (``poles``, as ``analyse`` returned
         them), by set: one name or None per pole in the set's order, a conjugate pair both
@@ -265,6 +282,7 @@ MODULES = (
     "ekf_disturbance",
     "lqg_vs_pid",
     "sensor_placement",
+    "rotor_at_speed",
     "maglev_tracking",
     "maglev_tuning",
     "thrust_liftoff",

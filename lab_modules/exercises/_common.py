@@ -14,7 +14,9 @@ import numpy as np
 
 from lab_modules import analysis
 from lab_modules.controllers.pid import pid
+from lab_modules.exercises._radial_axis_controls import PAPER_PID, PLANT_NOISE, SENSOR_LAG
 from lab_modules.loops.radial_axis_experiment import AxisSetup
+from lab_modules.parameters import in_si
 from lab_modules.plants.radial_bearing import RIG
 
 #: ``controllers.pid`` remembered per setting: its Tustin discretisation takes
@@ -25,8 +27,9 @@ _cached_pid = lru_cache(maxsize=128)(pid)
 
 def pid_from_values(values: dict, gain_factor: float = 1.0) -> control.StateSpace:
     """The PID of the controller sliders at the rig's sample time, its gain K times ``gain_factor``."""
-    return _cached_pid(values["pid_gain"] * gain_factor, values["integral_time_ms"] * 1e-3,
-                       values["derivative_time_ms"] * 1e-3, values["derivative_filter_us"] * 1e-6,
+    si = in_si(PAPER_PID, values)
+    return _cached_pid(values["pid_gain"] * gain_factor, si["integral_time_ms"],
+                       si["derivative_time_ms"], si["derivative_filter_us"],
                        RIG.sample_time_s)
 
 
@@ -37,7 +40,7 @@ def ekf_loop_fields(values: dict) -> dict:
     return {"controller": pid_from_values(values),
             "use_estimate": values["feedback"] == "estimated",
             "filter_R_diag": np.array([values["filter_r_position"], values["filter_r_current"]]),
-            "sensor_noise_m": values["sensor_noise_um"] * 1e-6,
+            "sensor_noise_m": in_si(PLANT_NOISE, values)["sensor_noise_um"],
             "current_noise_a": values["current_noise_a"],
             "process_force_n": values["disturbance_force_n"]}
 
@@ -48,7 +51,7 @@ def linear_axis(values: dict) -> AxisSetup:
     the same q_22, q_33 and R, k_i and k_x held at their rated values.  The parameter states are random
     walks whose error poles sit near s = 0 and move with the excitation: not shown."""
     return AxisSetup(controller=pid_from_values(values), use_estimate=values["feedback"] == "estimated",
-                     sensor_lag_s=values["sensor_lag_us"] * 1e-6, filter_q_velocity=values["filter_q_velocity"],
+                     sensor_lag_s=SENSOR_LAG.si(values), filter_q_velocity=values["filter_q_velocity"],
                      filter_q_current=values["filter_q_current"], filter_r_position=values["filter_r_position"],
                      filter_r_current=values["filter_r_current"])
 

@@ -21,9 +21,10 @@ from lab_modules.controllers.lqr import (
 )
 from lab_modules.controllers.pid import setpoint_filter
 from lab_modules.exercises._common import pid_from_values
-from lab_modules.exercises._radial_axis_controls import AMPLIFIER_NOISE_A
+from lab_modules.exercises._radial_axis_controls import AMPLIFIER_NOISE_A, PAPER_PID, PLANT_NOISE, SENSOR_LAG
 from lab_modules.loops.radial_axis_experiment import AxisSetup
 from lab_modules.loops.radial_axis_step_tests import loop_figures
+from lab_modules.parameters import Parameter, in_si
 from lab_modules.plants.radial_bearing import RIG
 
 T = RIG.sample_time_s
@@ -39,6 +40,22 @@ PAPER_GAINS, DESIGNED, REDESIGN = "paper eq. 22", "LQR from Q_J, R_J", "redesign
 #: filter's, and the reference still enters through the integrator only.
 REDESIGN_FACTORS = (316.0, 316.0, 1.0, 10.0)
 REDESIGN_WEIGHTS = tuple(f * w for f, w in zip(REDESIGN_FACTORS, PAPER_LQR_WEIGHTS))
+
+P = Parameter
+#: The steps of Figs. 8-9 and the scope's square wave, defined beside the set-up that reads them.
+EXCITATION = (
+    P("reference_step_um", "Reference step Δx", "µm", 50.0, 1.0, 200.0,
+      "Reference position step (Fig. 8: 50 µm).", step=1.0, group="Excitation"),
+    P("disturbance_step_n", "Disturbance step Δf_z", "N", 400.0, 10.0, 1000.0,
+      "Step of the disturbance force f_z (Fig. 9: 400 N).", step=10.0, group="Excitation"),
+    P("scope_excitation", "Scope excitation", "", "reference step",
+      choices=("reference step", "disturbance step"),
+      description="Which step the live scope repeats as a square wave.", group="Excitation"),
+    P("step_period_ms", "Step period", "ms", 200.0, 20.0, 1000.0,
+      "Period of the scope's square wave.", step=10.0, group="Excitation"),
+)
+#: The controls whose SI values the loops' set-up reads.
+SET_UP_CONTROLS = (*PAPER_PID, *PLANT_NOISE, SENSOR_LAG, *EXCITATION)
 
 
 def regulator(values: dict) -> StateFeedback:
@@ -61,9 +78,10 @@ def pid_reference_filter(values: dict, derivative_time_s: float | None = None):
     """The I-PD's reference filter for the PID sliders (None for the plain PID)."""
     if values["pid_structure"] != "I-PD":
         return None
+    si = in_si(SET_UP_CONTROLS, values)
     if derivative_time_s is None:
-        derivative_time_s = values["derivative_time_ms"] * 1e-3
-    return setpoint_filter(values["integral_time_ms"] * 1e-3, derivative_time_s,
+        derivative_time_s = si["derivative_time_ms"]
+    return setpoint_filter(si["integral_time_ms"], derivative_time_s,
                            derivative_time_s * derivative_filter_ratio(values), T)
 
 
@@ -75,11 +93,12 @@ def derivative_filter_ratio(values: dict) -> float:
 def common_setup(values: dict) -> AxisSetup:
     """Rig, noise, filter and excitation that both loops share (no controller yet)."""
     scope_reference = values["scope_excitation"] == "reference step"
+    si = in_si(SET_UP_CONTROLS, values)
     return AxisSetup(
         controller=None,
         nonlinear=values["force_law"] == "nonlinear",
-        sensor_lag_s=values["sensor_lag_us"] * 1e-6,
-        sensor_noise_m=values["sensor_noise_um"] * 1e-6,
+        sensor_lag_s=si["sensor_lag_us"],
+        sensor_noise_m=si["sensor_noise_um"],
         current_noise_a=values["current_noise_a"],
         process_force_n=values["disturbance_force_n"],
         process_current_a=AMPLIFIER_NOISE_A,
@@ -87,9 +106,9 @@ def common_setup(values: dict) -> AxisSetup:
         filter_q_current=values["filter_q_current"],
         filter_r_position=values["filter_r_position"],
         filter_r_current=values["filter_r_current"],
-        reference_step_m=values["reference_step_um"] * 1e-6 if scope_reference else 0.0,
+        reference_step_m=si["reference_step_um"] if scope_reference else 0.0,
         disturbance_step_n=0.0 if scope_reference else values["disturbance_step_n"],
-        step_period_s=values["step_period_ms"] * 1e-3,
+        step_period_s=si["step_period_ms"],
     )
 
 

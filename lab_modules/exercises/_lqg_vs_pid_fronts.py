@@ -21,12 +21,14 @@ from lab_modules.exercises import Plot
 from lab_modules.exercises._lqg_vs_pid_design import (
     COLORS,
     LOOPS,
+    SET_UP_CONTROLS,
     common_setup,
     derivative_filter_ratio,
     lqg_setup,
 )
 from lab_modules.loops.radial_axis_experiment import AxisSetup
 from lab_modules.loops.radial_axis_step_tests import LINEAR_WINDOW_S, loop_figures
+from lab_modules.parameters import in_si
 from lab_modules.plants.radial_bearing import RIG
 
 T = RIG.sample_time_s
@@ -105,10 +107,11 @@ def _pid_front(key: tuple) -> Designs:
     values, common = _linear_common(PID_FRONT_SETTINGS, key)
     rows = []
     ratio = derivative_filter_ratio(values)
+    integral_time_s = in_si(SET_UP_CONTROLS, values)["integral_time_ms"]
     for derivative_time_s in FRONT_PID_DERIVATIVE_TIMES_S:
-        at_slider_gain = pid(values["pid_gain"], values["integral_time_ms"] * 1e-3,
+        at_slider_gain = pid(values["pid_gain"], integral_time_s,
                              derivative_time_s, ratio * derivative_time_s, T)
-        prefilter = setpoint_filter(values["integral_time_ms"] * 1e-3, derivative_time_s,
+        prefilter = setpoint_filter(integral_time_s, derivative_time_s,
                                     ratio * derivative_time_s, T)
         for factor in FRONT_PID_GAIN_FACTORS:
             axis = common.with_changes(controller=factor * at_slider_gain,
@@ -177,7 +180,7 @@ def front_figures(values: dict, pid_noise_a: float) -> dict[str, float]:
     PID design's RMS noise current, and the least peak current on the
     reference step that reaches ``FRONT_STIFFNESS_TARGET_N_PER_M`` per family."""
     lqg, pid_family = fronts(values)
-    step_m = values["reference_step_um"] * 1e-6
+    step_m = in_si(SET_UP_CONTROLS, values)["reference_step_um"]
     L, Pf = lqg.admissible, pid_family.admissible
     return {
         "stiffness_ratio_at_equal_noise":
@@ -241,7 +244,7 @@ def front_plots(values: dict, linear: dict[str, dict] | None) -> list[Plot]:
     current on the reference step, (c) minimum dynamic stiffness against the
     RMS noise current; every swept design, the lightly damped ones grey, the
     designs in use marked.  ``linear`` None: the empty frames (still computing)."""
-    step_m = values["reference_step_um"] * 1e-6
+    step_m = in_si(SET_UP_CONTROLS, values)["reference_step_um"]
     titles = ("Trade-off front (a): step stiffness against noise current",
               f"Trade-off front (b): step stiffness against peak current, {values['reference_step_um']:g} µm step",
               "Trade-off front (c): minimum dynamic stiffness against noise current")

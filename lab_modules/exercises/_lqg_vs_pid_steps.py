@@ -7,9 +7,10 @@ from __future__ import annotations
 import numpy as np
 
 from lab_modules.exercises import Plot
-from lab_modules.exercises._lqg_vs_pid_design import COLORS, LOOPS
+from lab_modules.exercises._lqg_vs_pid_design import COLORS, LOOPS, SET_UP_CONTROLS
 from lab_modules.loops.radial_axis_experiment import AxisSetup
 from lab_modules.loops.radial_axis_step_tests import AFTER_STEP_S, BEFORE_STEP_S, column, step_tests
+from lab_modules.parameters import in_si
 from lab_modules.plants.radial_bearing import RIG
 
 T = RIG.sample_time_s
@@ -18,7 +19,7 @@ PLOT_POINTS = 500
 
 def step_tests_at(values: dict, loops: dict[str, AxisSetup]) -> dict[str, dict]:
     """Both step tests (Figs. 8-9) of both loops with the steps set on the controls."""
-    return step_tests(loops, values["reference_step_um"] * 1e-6, values["disturbance_step_n"])
+    return step_tests(loops, in_si(SET_UP_CONTROLS, values)["reference_step_um"], values["disturbance_step_n"])
 
 
 def sampled(trace: np.ndarray, name: str, rows: np.ndarray, scale: float) -> np.ndarray:

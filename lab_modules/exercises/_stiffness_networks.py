@@ -19,7 +19,7 @@ from lab_modules.estimators.fuzzy_basis_network import (
     training_grid,
 )
 from lab_modules.estimators.stiffness_identification import lsm_factors, lsm_tables
-from lab_modules.parameters import Parameter
+from lab_modules.parameters import Parameter, in_si
 from lab_modules.plants.axial_bearing import N_PER_MM
 
 P = Parameter
@@ -58,7 +58,8 @@ NETWORK_DEFAULTS = {p.name: p.default for p in (*NETWORK_CONTROLS, NOISE_SEED)}
 
 def lsm_kwargs(values: dict) -> dict:
     """The least-squares settings of the controls in SI units (``lsm_factors``' keywords)."""
-    return {"stencil_a": values["stencil_current_ma"] * 1e-3, "stencil_m": values["stencil_position_um"] * 1e-6,
+    si = in_si(NETWORK_CONTROLS, values)
+    return {"stencil_a": si["stencil_current_ma"], "stencil_m": si["stencil_position_um"],
             "intercept": values["fit"] == "with_intercept"}
 
 

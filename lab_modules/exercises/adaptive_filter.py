@@ -36,7 +36,7 @@ import scipy.linalg
 from lab_modules import analysis
 from lab_modules.claims import Claim
 from lab_modules.estimators.scheduled_kalman import model_matrices, process_noise
-from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises import Analysis, Chart, Exercise, Plot, PoleCategory, Series
 from lab_modules.exercises._stiffness_networks import FBFNN_EPOCHS, FBFNN_RATE, NETWORK_DEFAULTS, networks
 from lab_modules.loops.axial_bearing_loop import (
     COLUMNS,
@@ -52,7 +52,7 @@ from lab_modules.loops.axial_bearing_loop import (
     column,
     loop_at_plant_input,
 )
-from lab_modules.parameters import Parameter
+from lab_modules.parameters import Parameter, in_si
 from lab_modules.plants.axial_bearing import AXIAL, GRID_CURRENTS_A, GRID_POSITIONS_M, N_PER_MM
 from lab_modules.scenes.force_map import OperatingPointScene
 
@@ -111,18 +111,19 @@ def fbfnn(values: dict):
 def setup(values: dict) -> LoopSetup:
     """Centre (50 ms), point 1: move, then load; back to the centre; point 2: move, then load."""
     weight = AXIAL.weight_n
-    x1, x2 = values["point1_position_mm"] * 1e-3, values["point2_position_mm"] * 1e-3
+    si = in_si(PARAMETERS, values)
+    x1, x2 = si["point1_position_mm"], si["point2_position_mm"]
     load1, load2 = weight - values["point1_force_n"], weight - values["point2_force_n"]
     pair = fbfnn(values)
     return LoopSetup(
         segments=(Segment(0.0, 0.0, 0.0), Segment(0.05, x1, 0.0), Segment(0.1, x1, load1),
                   Segment(0.3, 0.0, 0.0), Segment(0.35, x2, 0.0), Segment(0.4, x2, load2)),
-        period_s=PERIOD_S, load_ramp_s=values["load_ramp_ms"] * 1e-3,
+        period_s=PERIOD_S, load_ramp_s=si["load_ramp_ms"],
         fbfnn_ki=(pair.ki.weights, pair.ki.widths), fbfnn_ks=(pair.ks.weights, pair.ks.widths),
         var_process_a2=values["var_process_a2"], var_sensor_v2=values["var_sensor_v2"],
-        q_force_n2=values["q_force_n2"], sensor_lag_s=values["sensor_lag_us"] * 1e-6,
-        feedback=values["feedback"], proportional_a_per_m=values["proportional_a_per_mm"] * 1e3,
-        integral_time_s=values["integral_time_ms"] * 1e-3, derivative_a_s_per_m=values["derivative_a_s_per_m"])
+        q_force_n2=values["q_force_n2"], sensor_lag_s=si["sensor_lag_us"],
+        feedback=values["feedback"], proportional_a_per_m=si["proportional_a_per_mm"],
+        integral_time_s=si["integral_time_ms"], derivative_a_s_per_m=values["derivative_a_s_per_m"])
 
 
 ERROR_COLUMNS = tuple(f"{f}_{q}_error_{u}" for f in FILTERS for q, u in (("x", "m"), ("force", "n")))
@@ -331,6 +332,9 @@ class AdaptiveFilter(Exercise):
                   ("F_St error [N]", "disturbance-force estimate error"),
                   ("x_M error [V]", "sensor-lag estimate error")]
         return {"filter error (centre model)": (A - A @ K @ H, states, T)}
+
+    def pole_categories(self, values: dict) -> dict[str, PoleCategory]:
+        return {"filter error (centre model)": PoleCategory.FILTER_ERROR}
 
     def analyse(self, values: dict):
         trace, status = run(values)

@@ -47,7 +47,7 @@ import numpy as np
 from lab_modules import analysis
 from lab_modules.claims import Claim
 from lab_modules.estimators import extended_kalman as ef
-from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises import Analysis, Chart, Exercise, Plot, PoleCategory, Series
 from lab_modules.exercises._common import (
     AXIS_ERROR_STATES,
     axis_mode_matrices,
@@ -73,7 +73,7 @@ from lab_modules.loops.radial_axis_ekf_loop import (
     loop_at_plant_input,
     no_input,
 )
-from lab_modules.parameters import Parameter
+from lab_modules.parameters import Parameter, in_si
 from lab_modules.plants.radial_bearing import DEFAULT_SENSOR_LAG_S, RIG
 from lab_modules.scenes.bearing import ESTIMATE_RED, MEASURED_GREY, BearingScene, Ghost
 
@@ -129,21 +129,22 @@ def setup(values: dict, experiment: str | None = None, step_n: float | None = No
     overrides the choice; "step" is the metrics' one-shot step of ``step_n``."""
     experiment = experiment or values["experiment"]
     step_n = values["disturbance_step_n"] if step_n is None else step_n
+    si = in_si(PARAMETERS, values)
     if experiment == "gap_sweep":
-        reference = Sine(values["sweep_amplitude_um"] * 1e-6, values["sweep_period_ms"] * 1e-3, SWEEP_START_S)
+        reference = Sine(si["sweep_amplitude_um"], si["sweep_period_ms"], SWEEP_START_S)
         disturbance = Ramp(values["sweep_load_n"], LOAD_RAMP_S)
     elif experiment == "step":
         reference, disturbance = no_input, Step(step_n, STEP_TIME_S)
     else:
-        reference, disturbance = no_input, SquareWave(step_n, values["step_period_ms"] * 1e-3)
+        reference, disturbance = no_input, SquareWave(step_n, si["step_period_ms"])
     return EKFLoopSetup(
         model=ef.NONLINEAR,
         filter_x0=np.zeros(ef.N_STATES),
         filter_P0=np.diag([10e-6, 1e-3, 0.1, 10e-6, 100.0]) ** 2,
         filter_Q=np.diag([0.0, values["filter_q_velocity"], values["filter_q_current"], 0.0,
                           values["filter_q_force"]]),
-        filter_sensor_lag_s=values["filter_sensor_lag_us"] * 1e-6,
-        plant_sensor_lag_s=values["sensor_lag_us"] * 1e-6,
+        filter_sensor_lag_s=si["filter_sensor_lag_us"],
+        plant_sensor_lag_s=si["sensor_lag_us"],
         feedforward=values["feedforward"] == "on",
         **ekf_loop_fields(values),
         reference=reference, disturbance=disturbance, experiment=experiment)
@@ -180,7 +181,7 @@ def force_step(values: dict, duration_s: float = 0.25) -> dict:
 def gap_sweep(values: dict) -> dict:
     """Fig. 5: the factors of eq. 18 against the analytic derivatives of eq. 10
     over one sweep period (samples after the load ramp and the first 10 ms)."""
-    duration = SWEEP_START_S + values["sweep_period_ms"] * 1e-3
+    duration = SWEEP_START_S + in_si(PARAMETERS, values)["sweep_period_ms"]
     trace, status = _run(setup(values, "gap_sweep"), int(values["seed"]), duration)
     keep = trace[:, 0] >= SWEEP_START_S
     out = {"status": status or "ok", "t": trace[keep, 0], "x_um": 1e6 * column(trace, "x_true_m")[keep]}
@@ -202,7 +203,7 @@ def filter_poles(values: dict) -> np.ndarray:
 def filter_error_matrix(values: dict) -> np.ndarray:
     """Phi - L G of the steady-state filter linearised at the centre (x = 0, i = 0), its
     states (x, v, i, x_d, f_z) of eq. 13, L from python-control's dlqe."""
-    physics = ef.physics_vector(RIG, values["filter_sensor_lag_us"] * 1e-6)
+    physics = ef.physics_vector(RIG, in_si(PARAMETERS, values)["filter_sensor_lag_us"])
     F, Phi = np.zeros((ef.N_STATES, ef.N_STATES)), np.zeros((ef.N_STATES, ef.N_STATES))
     ef.jacobian(ef.NONLINEAR, np.zeros(ef.N_STATES), physics, F)
     ef.transition_matrix(F, T, Phi)
@@ -326,7 +327,7 @@ class EkfDisturbance(Exercise):
         notes = [f"Force step: {step['status']}", f"Gap sweep: {sweep['status']}",
                  ("Eq. 18 returns exactly the derivatives of eq. 10 at the filter's estimate (x_hat, i_hat); "
                   "its error against the truth is the estimate's error, mostly that of i_hat.")]
-        plant = RIG.continuous_model(values["sensor_lag_us"] * 1e-6)
+        plant = RIG.continuous_model(in_si(PARAMETERS, values)["sensor_lag_us"])
         poles = {"open-loop plant": np.linalg.eigvals(np.asarray(plant.A)),
                  CLOSED_LOOP: analysis.z_to_s(analysis.loop_poles(linear_axis(values).loop()), T),
                  "filter error (at x = 0)": filter_poles(values)}
@@ -341,6 +342,10 @@ class EkfDisturbance(Exercise):
         states = [*AXIS_ERROR_STATES, ("f_z error [N]", "disturbance-force estimate error")]
         return {**axis_mode_matrices(linear_axis(values), CLOSED_LOOP),
                 "filter error (at x = 0)": (filter_error_matrix(values), states, T)}
+
+    def pole_categories(self, values: dict) -> dict[str, PoleCategory]:
+        return {"open-loop plant": PoleCategory.PLANT, CLOSED_LOOP: PoleCategory.CLOSED_LOOP,
+                "filter error (at x = 0)": PoleCategory.FILTER_ERROR}
 
     def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
         """The open-loop plant's poles by name (the loops' poles keep their generic kind)."""

@@ -38,7 +38,7 @@ import numpy as np
 from lab_modules import analysis
 from lab_modules.claims import Claim
 from lab_modules.estimators import extended_kalman as ef
-from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises import Analysis, Chart, Exercise, Plot, PoleCategory, Series
 from lab_modules.exercises._common import (
     axis_mode_matrices,
     axis_plant_names,
@@ -61,7 +61,7 @@ from lab_modules.loops.radial_axis_ekf_loop import (
     rest_current_a,
 )
 from lab_modules.loops.radial_axis_experiment import AxisSetup
-from lab_modules.parameters import Parameter
+from lab_modules.parameters import Parameter, in_si
 from lab_modules.plants.radial_bearing import RIG
 from lab_modules.scenes.bearing import ESTIMATE_RED, MEASURED_GREY, BearingScene, Ghost
 
@@ -110,17 +110,18 @@ PARAMETERS = (
 
 def setup(values: dict, excitation: bool = True) -> EKFLoopSetup:
     """The experiment described by the parameter values (PRBS off: ``excitation=False``)."""
-    initial = np.array([0.0, 0.0, 0.0, values["initial_ki_n_per_a"], values["initial_kx_n_per_um"] * 1e6])
+    si = in_si(PARAMETERS, values)
+    initial = np.array([0.0, 0.0, 0.0, values["initial_ki_n_per_a"], si["initial_kx_n_per_um"]])
     sigma0 = np.array([10e-6, 1e-3, 0.1, INITIAL_SIGMA_FRACTION * KI_RATED, INITIAL_SIGMA_FRACTION * KX_RATED])
-    amplitude = values["prbs_amplitude_um"] * 1e-6 if excitation else 0.0
+    amplitude = si["prbs_amplitude_um"] if excitation else 0.0
     return EKFLoopSetup(
         model=ef.LINEARISED,
         filter_x0=initial, filter_P0=np.diag(sigma0**2),
         filter_Q=np.diag([0.0, values["filter_q_velocity"], values["filter_q_current"],
                           values["filter_q_ki"], values["filter_q_kx"]]),
-        plant_sensor_lag_s=values["sensor_lag_us"] * 1e-6,
+        plant_sensor_lag_s=si["sensor_lag_us"],
         **ekf_loop_fields(values),
-        reference=Prbs(amplitude, values["prbs_bit_time_ms"] * 1e-3, values["reference_offset_um"] * 1e-6))
+        reference=Prbs(amplitude, si["prbs_bit_time_ms"], si["reference_offset_um"]))
 
 
 def linear_poles(axis: AxisSetup) -> dict[str, np.ndarray]:
@@ -244,10 +245,11 @@ class EkfParameters(Exercise):
     def open_loops(self, values: dict) -> dict:
         """The PID loop linearised at the operating point x_0, the EKF at its converged estimates."""
         return {f"PID, {values['feedback']} x": loop_at_plant_input(
-            setup(values), values["reference_offset_um"] * 1e-6)}
+            setup(values), in_si(PARAMETERS, values)["reference_offset_um"])}
 
     def analyse(self, values: dict) -> Analysis:
-        offset = values["reference_offset_um"] * 1e-6
+        si = in_si(PARAMETERS, values)
+        offset = si["reference_offset_um"]
         kx, ki = operating_point(offset)
         x_um = np.linspace(-200.0, 200.0, 81)
         factors = np.array([operating_point(x * 1e-6) for x in x_um])
@@ -265,13 +267,18 @@ class EkfParameters(Exercise):
             ("True k_i at the operating point", ki, "N/A"),
             ("True k_x at the operating point", kx * 1e-6, "N/µm"),
             ("Initial k_i error", 100.0 * (values["initial_ki_n_per_a"] / ki - 1.0), "%"),
-            ("Initial k_x error", 100.0 * (values["initial_kx_n_per_um"] * 1e6 / kx - 1.0), "%"),
+            ("Initial k_x error", 100.0 * (si["initial_kx_n_per_um"] / kx - 1.0), "%"),
         ]
         poles = linear_poles(linear_axis(values))
         notes = [("The true local values on the scope are the derivatives of eq. 10 at the rotor's "
                  "true position and current; they move with the PRBS, the estimates cannot "
                  "(eq. 9 is linear).")]
         return Analysis(readouts, poles, notes, plots)
+
+    def pole_categories(self, values: dict) -> dict[str, PoleCategory]:
+        return {"open-loop plant": PoleCategory.PLANT,
+                "closed loop (linear, rated k_i, k_x)": PoleCategory.CLOSED_LOOP,
+                "filter error (x, v, i at rated k_i, k_x)": PoleCategory.FILTER_ERROR}
 
     def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
         """The open-loop plant's poles by name (the loops' poles keep their generic kind)."""

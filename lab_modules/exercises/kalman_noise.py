@@ -23,7 +23,7 @@ import numpy as np
 
 from lab_modules import analysis
 from lab_modules.claims import Claim
-from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises import Analysis, Chart, Exercise, Plot, PoleCategory, Series
 from lab_modules.exercises._common import axis_mode_matrices, axis_plant_names, pairs, pid_from_values
 from lab_modules.exercises._radial_axis_controls import (
     AMPLIFIER_NOISE_A,
@@ -39,7 +39,7 @@ from lab_modules.exercises._radial_axis_controls import (
 )
 from lab_modules.loops.radial_axis_experiment import AxisSetup, AxisSimulation
 from lab_modules.loops.radial_axis_loop import TRACE_COLUMNS
-from lab_modules.parameters import Parameter
+from lab_modules.parameters import Parameter, in_si
 from lab_modules.plants.radial_bearing import RIG
 from lab_modules.scenes.bearing import ESTIMATE_RED, MEASURED_GREY, BearingScene, Ghost
 
@@ -82,12 +82,13 @@ GAIN_CRITERION = ("largest common gain factor at which the noise-driven RMS roto
 
 def setup(values: dict) -> AxisSetup:
     """The physical set-up described by the exercise's parameter values."""
+    si = in_si(PARAMETERS, values)
     return AxisSetup(
         controller=pid_from_values(values, values["gain_factor"]),
         use_estimate=values["feedback"] == "estimated",
         nonlinear=values["force_law"] == "nonlinear",
-        sensor_lag_s=values["sensor_lag_us"] * 1e-6,
-        sensor_noise_m=values["sensor_noise_um"] * 1e-6,
+        sensor_lag_s=si["sensor_lag_us"],
+        sensor_noise_m=si["sensor_noise_um"],
         current_noise_a=values["current_noise_a"],
         process_force_n=values["disturbance_force_n"],
         process_current_a=AMPLIFIER_NOISE_A,
@@ -95,9 +96,9 @@ def setup(values: dict) -> AxisSetup:
         filter_q_current=values["filter_q_current"],
         filter_r_position=values["filter_r_position"],
         filter_r_current=values["filter_r_current"],
-        reference_step_m=values["reference_step_um"] * 1e-6,
+        reference_step_m=si["reference_step_um"],
         disturbance_step_n=values["disturbance_step_n"],
-        step_period_s=values["step_period_ms"] * 1e-3,
+        step_period_s=si["step_period_ms"],
     )
 
 
@@ -207,6 +208,10 @@ class KalmanNoise(Exercise):
         axis = setup(values)
         return {f"{source} feedback": axis.with_changes(use_estimate=source == "estimated").loop_at_plant_input()
                 for source in ("measured", "estimated")}
+
+    def pole_categories(self, values: dict) -> dict[str, PoleCategory]:
+        return {"open-loop plant": PoleCategory.PLANT, "closed loop": PoleCategory.CLOSED_LOOP,
+                "filter error": PoleCategory.FILTER_ERROR}
 
     def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
         """The open-loop plant's poles by name (the loops' poles keep their generic kind)."""

@@ -43,7 +43,7 @@ import numpy as np
 
 from lab_modules.claims import Claim
 from lab_modules.controllers.lqr import PAPER_LQG, PAPER_LQR_WEIGHTS, gain_deviation, integral_augmented_model
-from lab_modules.exercises import Analysis, Chart, Exercise, Series
+from lab_modules.exercises import Analysis, Chart, Exercise, PoleCategory, Series
 from lab_modules.exercises._common import (
     AXIS_STATES,
     INTEGRAL_STATE,
@@ -54,6 +54,7 @@ from lab_modules.exercises._common import (
 from lab_modules.exercises._lqg_vs_pid_design import (
     COLORS,
     DESIGNED,
+    EXCITATION,
     LOOPS,
     PAPER_GAINS,
     REDESIGN,
@@ -150,15 +151,7 @@ PARAMETERS = (
     *PLANT_NOISE,
     FORCE_LAW,
     SENSOR_LAG,
-    P("reference_step_um", "Reference step Δx", "µm", 50.0, 1.0, 200.0,
-      "Reference position step (Fig. 8: 50 µm).", step=1.0, group="Excitation"),
-    P("disturbance_step_n", "Disturbance step Δf_z", "N", 400.0, 10.0, 1000.0,
-      "Step of the disturbance force f_z (Fig. 9: 400 N).", step=10.0, group="Excitation"),
-    P("scope_excitation", "Scope excitation", "", "reference step",
-      choices=("reference step", "disturbance step"),
-      description="Which step the live scope repeats as a square wave.", group="Excitation"),
-    P("step_period_ms", "Step period", "ms", 200.0, 20.0, 1000.0,
-      "Period of the scope's square wave.", step=10.0, group="Excitation"),
+    *EXCITATION,
     SEED,
     replace(TIME_SCALE, default=0.02),
 )
@@ -279,6 +272,10 @@ class LqgVsPid(Exercise):
                 "regulator_states": ["x [m]", "v [m/s]", "i [A]", "xi = ∫(r - x) dt [m s]"],
                 "A_aug": A_aug.tolist(), "B_aug": B_aug.tolist(),
                 "state_gain_K": list(lqg.state_gain), "integral_gain_K_I_v_per_m_s": lqg.integral_gain_v_per_m_s}
+
+    def pole_categories(self, values: dict) -> dict[str, PoleCategory]:
+        return {"open-loop plant": PoleCategory.PLANT, "PID loop with filter": PoleCategory.CLOSED_LOOP,
+                "LQG regulator": PoleCategory.REGULATOR, "Kalman filter error": PoleCategory.FILTER_ERROR}
 
     def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
         """The open-loop plant's poles by name (the loops' poles keep their generic kind)."""

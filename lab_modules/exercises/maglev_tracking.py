@@ -29,7 +29,7 @@ from lab_modules.controllers.feedback_linearisation import (
     linearising_control,
 )
 from lab_modules.controllers.lead_lag import LEAD_LAG
-from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises import Analysis, Chart, Exercise, Plot, PoleCategory, Series
 from lab_modules.exercises._common import MAGLEV_LAGS, magnet_plant_names
 from lab_modules.loops.maglev_loop import (
     CONTROLLERS,
@@ -41,7 +41,7 @@ from lab_modules.loops.maglev_loop import (
     preset_q,
     record_lead_lag_run,
 )
-from lab_modules.parameters import Parameter, ParameterError
+from lab_modules.parameters import Parameter, ParameterError, in_si
 from lab_modules.plants.maglev_ball import TABLE_3_1
 from lab_modules.recordings import to_csv
 from lab_modules.scenes.maglev import Columns, DrawingScale, MaglevScene, exaggeration_for
@@ -130,14 +130,15 @@ def setup(values: dict, reference_name: str | None = None) -> MaglevSetup:
     """The experiment described by the parameter values."""
     Q = preset_q(values)
     current = TABLE_3_1.equilibrium_current_a(GAP_M)
+    si = in_si(PARAMETERS, values)
     return MaglevSetup(
         true_plant=replace(TABLE_3_1, coil_resistance_ohm=values["plant_resistance_ohm"]),
         poles_rad_per_s=(values["pole_1_rad_s"], values["pole_2_rad_s"], values["pole_3_rad_s"]),
         controller=values["controller"], filter=values["filter"], filter_Q=Q,
         plant_Q=Q if values["plant_noise"] == "matched" else np.zeros((3, 3)),
-        sensor_noise_m=values["sensor_noise_mm"] * 1e-3,
+        sensor_noise_m=si["sensor_noise_mm"],
         initial_state=(GAP_M, 0.0, current),
-        initial_estimate=(GAP_M + values["initial_position_error_mm"] * 1e-3, 0.0,
+        initial_estimate=(GAP_M + si["initial_position_error_mm"], 0.0,
                           current * (1.0 + values["initial_current_error_percent"] / 100.0)),
         initial_covariance=values["initial_covariance"],
         reference=reference(values, reference_name))
@@ -275,6 +276,11 @@ class MaglevTracking(Exercise):
                   ("x₃ coil current [A]", "coil current")]
         states += [(f"lead-lag state {k + 1} [V]", "lead-lag compensator") for k in range(loop.nstates - 3)]
         return {"lead-lag loop (linearised)": (np.asarray(loop.A), states, None)}
+
+    def pole_categories(self, values: dict) -> dict[str, PoleCategory]:
+        return {"open-loop plant (linearised, 14.8 mm)": PoleCategory.PLANT,
+                "feedback-linearised loop (eq. 2.29)": PoleCategory.CLOSED_LOOP,
+                "lead-lag loop (linearised)": PoleCategory.CLOSED_LOOP}
 
     def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
         """The linearised plant's poles by name (the loops' poles keep their generic kind)."""

@@ -28,12 +28,17 @@ import scipy.stats
 
 from lab_modules import recordings
 from lab_modules.claims import Claim
-from lab_modules.estimators.continuous_discrete_ekf import OBSERVER_COLUMNS, run_observer
+from lab_modules.estimators.continuous_discrete_ekf import (
+    OBSERVER_COLUMNS,
+    ObserverFilter,
+    RecordedSamples,
+    run_observer,
+)
 from lab_modules.estimators.kalman import correction
-from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises import Analysis, Chart, Exercise, Plot, PoleCategory, Series
 from lab_modules.exercises._common import MAGLEV_LAGS, magnet_plant_names
 from lab_modules.loops.maglev_loop import MaglevSetup, loop_at_plant_input, preset_q
-from lab_modules.parameters import Parameter, ParameterError
+from lab_modules.parameters import Parameter, ParameterError, in_si
 from lab_modules.plants.maglev_ball import TABLE_3_1
 from lab_modules.scenes.maglev import DRAWN_GAP_MAX_M, Columns, DrawingScale, MaglevScene, exaggeration_for
 
@@ -159,7 +164,9 @@ def drawing_scale(values: dict) -> DrawingScale:
 
 def filter_sigma_m(rec: recordings.Recording, values: dict) -> float:
     """The filter's sensor noise σ [m]: from the still segment (eq. 3.3) or the slider."""
-    return sensor_noise_m(rec, values) if values["r_source"] == "estimated" else values["filter_sensor_noise_mm"] * 1e-3
+    if values["r_source"] == "estimated":
+        return sensor_noise_m(rec, values)
+    return in_si(PARAMETERS, values)["filter_sensor_noise_mm"]
 
 
 def observe(rec: recordings.Recording, values: dict) -> dict[str, np.ndarray]:
@@ -171,8 +178,9 @@ def observe(rec: recordings.Recording, values: dict) -> dict[str, np.ndarray]:
     Q = filter_q(values)
     out = np.full((len(rec), len(OBSERVER_COLUMNS)), np.nan)
     priors = np.full((len(rec), 12), np.nan)
-    rows = run_observer(rec.time_s, rec.measured_m, rec.coil_voltage_v, x, P0, Q,
-                        sigma**2, TABLE_3_1.constants(), 1, out, priors)
+    rows = run_observer(RecordedSamples(time_s=rec.time_s, measured_m=rec.measured_m, voltage_v=rec.coil_voltage_v),
+                        ObserverFilter(x_hat=x, P=P0, Q=Q, R_m2=sigma**2, constants=TABLE_3_1.constants(), substeps=1),
+                        out, priors)
     columns = {name: out[:, i] for i, name in enumerate(OBSERVER_COLUMNS)}
     columns.update(time_s=rec.time_s, reference_m=rec.reference_m, x_measured_m=rec.measured_m,
                    coil_voltage_v=rec.coil_voltage_v, zero=np.zeros(len(rec)),
@@ -302,9 +310,7 @@ class MaglevTuning(Exercise):
         rec = recording(values)
         return {"states": ["x1 gap [m]", "x2 velocity [m/s]", "x3 current [A]"], "inputs": ["u coil [V]"],
                 "outputs": ["x1 [m]"], "plant": "eq. 2.10, Table 3.1", "filter": "continuous-discrete EKF",
-                "Q": filter_q(values).tolist(), "R": (sensor_noise_m(rec, values) ** 2
-                                                       if values["r_source"] == "estimated"
-                                                       else (values["filter_sensor_noise_mm"] * 1e-3) ** 2),
+                "Q": filter_q(values).tolist(), "R": filter_sigma_m(rec, values) ** 2,
                 "P0": (values["initial_covariance"] * np.eye(3)).tolist(),
                 "recording": rec.name, "recording_rows": len(rec), "recording_metadata": rec.metadata}
 
@@ -371,6 +377,10 @@ class MaglevTuning(Exercise):
                   ("v error [m/s]", "ball position/velocity estimate error"),
                   ("i error [A]", "coil current estimate error")]
         return {"filter error (steady state)": (A_error, states, dt)}
+
+    def pole_categories(self, values: dict) -> dict[str, PoleCategory]:
+        return {"open-loop plant (linearised)": PoleCategory.PLANT,
+                "filter error (steady state)": PoleCategory.FILTER_ERROR}
 
     def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
         """The linearised plant's poles by name (at the recording's mean gap, as ``linearised_poles``)."""

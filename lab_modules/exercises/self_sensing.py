@@ -40,11 +40,11 @@ from lab_modules.loops.self_sensing_loop import (
     SelfSensingLoop,
     SelfSensingSetup,
 )
-from lab_modules.parameters import Parameter
+from lab_modules.parameters import Parameter, in_si
 from lab_modules.plants.self_sensing_ball import RIG
 from lab_modules.scenes.self_sensing import SelfSensingScene
 
-from . import Action, Analysis, Chart, Exercise, Plot, Series
+from . import Action, Analysis, Chart, Exercise, Plot, PoleCategory, Series
 
 SAMPLE_TIMES_US = ("0.5", "1", "2")
 PWM_MODES = ("fixed T_pwm", "T_pwm = 1024 T_a")
@@ -121,20 +121,21 @@ PARAMETERS = (
 
 def setup(values: dict, **changes) -> SelfSensingSetup:
     """The experiment of the parameter values (``changes``: SelfSensingSetup fields to override)."""
-    sample_time = float(values["sample_time_us"]) * 1e-6
+    si = in_si(PARAMETERS, values)
+    sample_time = si["sample_time_us"]
     if values["pwm_mode"] == PWM_MODES[1]:
         samples = 1024
     else:
-        samples = round(values["pwm_period_us"] * 1e-6 / sample_time)
+        samples = round(si["pwm_period_us"] / sample_time)
     # a fixed share of the period, at most an eighth of it (the windows keep ≥ 20 samples at any duty)
     trim = min(round(values["trim_samples"] * samples / 1024), (samples - 40) // 8)
-    gap_1, gap_2 = values["gap_1_mm"] * 1e-3, values["gap_2_mm"] * 1e-3
+    gap_1, gap_2 = si["gap_1_mm"], si["gap_2_mm"]
     s = SelfSensingSetup(
         sample_time_s=sample_time, samples_per_period=samples, resistance_ratio=values["resistance_ratio"],
         printed_eq7=values["equation_7"] != "v − R̂ i", current_gain=values["current_gain"],
-        voltage_gain=values["voltage_gain"], current_offset_a=values["current_offset_ma"] * 1e-3,
-        voltage_offset_v=values["voltage_offset_v"], sigma_current_a=values["sigma_current_ma"] * 1e-3,
-        sigma_voltage_v=values["sigma_voltage_mv"] * 1e-3, trim_samples=trim, gap_1_m=gap_1, gap_2_m=gap_2,
+        voltage_gain=values["voltage_gain"], current_offset_a=si["current_offset_ma"],
+        voltage_offset_v=values["voltage_offset_v"], sigma_current_a=si["sigma_current_ma"],
+        sigma_voltage_v=si["sigma_voltage_mv"], trim_samples=trim, gap_1_m=gap_1, gap_2_m=gap_2,
         transition_s=values["transition_s"], trajectory=values["trajectory"],
         battery_voltage_v=values["battery_voltage_v"], printed_dof=values["equation_28"] != "M − d")
     return replace(s, **changes)
@@ -143,6 +144,11 @@ def setup(values: dict, **changes) -> SelfSensingSetup:
 def fixed(values: dict, gap: str, **changes) -> SelfSensingSetup:
     """The experiment held at one operating point."""
     return setup(values, trajectory=TRAJECTORIES[1 if gap == "gap_1" else 2], **changes)
+
+
+def coil_pole_set(gap_m: float) -> str:
+    """The name of the pole set that holds the coil's pole −R/L at a gap [m] (``Analysis.poles``)."""
+    return f"coil −R/L at {gap_m * 1e3:g} mm"
 
 
 # -- derived per-period columns --------------------------------------------------------------------
@@ -367,6 +373,11 @@ class SelfSensing(Exercise):
                 "inductance_h": RIG.inductance_h(gaps).tolist(),
                 "equilibrium_current_a": RIG.equilibrium_current_a(gaps).tolist()}
 
+    def pole_categories(self, values: dict) -> dict[str, PoleCategory]:
+        """Each gap's coil pole −R/L (its set named after the gap) is the plant's."""
+        s = setup(values)
+        return {coil_pole_set(gap_m): PoleCategory.PLANT for gap_m in (s.gap_1_m, s.gap_2_m)}
+
     def analyse(self, values: dict):
         s = setup(values)
         v_bat = s.battery_voltage_v
@@ -404,7 +415,7 @@ class SelfSensing(Exercise):
                 (f"σ̂(L̄) {tag} (eq. 31)", st["predicted_sigma_inductance_uh"], "µH"),
                 (f"σ̂(ŝ) {tag} (eq. 32)", st["predicted_sigma_position_um"], "µm"),
             ]
-            poles[f"coil −R/L {tag}"] = np.array([-RIG.coil_resistance_ohm / inductance], dtype=complex)
+            poles[coil_pole_set(gap_m)] = np.array([-RIG.coil_resistance_ohm / inductance], dtype=complex)
         notes = [("Readouts from 300 PWM periods held at each gap with the current settings; the histogram "
                  "is from those at gap 1. *Run Monte-Carlo* (controls, left) checks σ̂(L̄) over "
                  f"{MONTE_CARLO_SEEDS} seeds × {MONTE_CARLO_PERIODS} periods.")]

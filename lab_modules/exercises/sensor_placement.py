@@ -44,8 +44,27 @@ import scipy.signal
 
 from lab_modules import analysis
 from lab_modules.claims import Claim
-from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises import Analysis, Chart, Exercise, Plot, PoleCategory, Series
 from lab_modules.exercises._common import AXIS_LAGS, controller_states, nearest_names, pid_from_values
+from lab_modules.exercises._flexible_rotor import (
+    CAPACITIVE_NOISE,
+    CONTROLLER,
+    CURRENT_NOISE_A,
+    DISTURBANCE_FORCE,
+    EDDY_CURRENT_NOISE,
+    EXTERNAL_OFFSET_MM,
+    GEOMETRY,
+    K_MI,
+    K_MX,
+    MODAL_DAMPING,
+    OFFSET_RANGE_MM,
+    SENSOR_LAG,
+    T,
+    filter_for,
+    integrated,
+    scaled_pid,
+    sensor_noise_m,
+)
 from lab_modules.loops.flexible_rotor_loop import (
     LOOP_OUTPUTS,
     LoopSimulation,
@@ -54,23 +73,11 @@ from lab_modules.loops.flexible_rotor_loop import (
     kalman_compensator,
     pid_compensator,
 )
-from lab_modules.parameters import Parameter
-from lab_modules.plants.flexible_rotor import FlexibleRotor, RotorGeometry, modal_plant
+from lab_modules.parameters import Parameter, in_si
+from lab_modules.plants.flexible_rotor import FlexibleRotor, modal_plant
 from lab_modules.plants.radial_bearing import RIG
 from lab_modules.scenes.rotor import RotorScene
 
-T = RIG.sample_time_s
-K_MX, K_MI = RIG.position_sensor_gain_v_per_m, RIG.current_sensor_gain_v_per_a
-GEOMETRY = RotorGeometry()
-#: eq. 16: R_x = 7.1e-4 V^2 at K_mx = 20 mV/µm -> 1.33 µm
-CAPACITIVE_NOISE_UM = float(np.sqrt(7.1e-4) / K_MX * 1e6)
-EDDY_CURRENT_NOISE_UM = 0.27
-CURRENT_NOISE_A = float(np.sqrt(1.4e-1) / K_MI)          # eq. 16: 1.87 A
-EXTERNAL_OFFSET_MM = 60.0
-INTEGRATED_HALF_WIDTH_MM = GEOMETRY.stack_length_m / 2 * 1e3
-OFFSET_RANGE_MM = (-100.0, 100.0)
-DISTURBANCE_FORCE_N = 0.5                                # unmodelled force per sample, as kalman_noise
-AMPLIFIER_NOISE_A = 1e-3
 GAIN_STEP = 0.05
 GAIN_SEARCH = np.round(np.arange(GAIN_STEP, 4.0 + 1e-9, GAIN_STEP), 2)   # gain factors tried, bottom up
 PATH_OFFSETS_MM = np.linspace(*OFFSET_RANGE_MM, 43)
@@ -81,38 +88,20 @@ PARAMETERS = (
       "Axial position of the position sensor (+ towards the free end). Within ±20 mm: the integrated "
       "capacitive sensor; outside: an eddy-current sensor on its own track (paper §I).",
       step=1.0, group="Sensor"),
-    P("capacitive_noise_um", "Integrated sensor noise σ", "µm", round(CAPACITIVE_NOISE_UM, 4), 0.0, 10.0,
-      "Noise of the capacitive sensor in the pole gaps (paper eq. 16: 1.33 µm).", step=0.01, group="Sensor"),
-    P("eddy_current_noise_um", "External sensor noise σ", "µm", EDDY_CURRENT_NOISE_UM, 0.0, 10.0,
-      "Noise of the eddy-current sensor (not in the paper: 0.27 µm, see worksheet).", step=0.01,
-      group="Sensor"),
-    P("sensor_lag_us", "Sensor lag T_mx", "µs", 50.0, 0.0, 500.0,
-      "First-order lag of either sensor, eq. 12 (not in the paper: 50 µs, see worksheet).", step=5.0,
-      group="Sensor"),
-    P("gain_factor", "Common gain factor", "×", 1.0, 0.05, 4.0,
-      "Multiplies the PID gain K (paper: +75 % with the integrated sensor).", step=0.01, group="Controller"),
-    P("pid_gain", "PID gain K", "V/V", 0.65, 0.05, 5.0, "Paper §IV: 0.65.", step=0.01, group="Controller"),
-    P("integral_time_ms", "Integral time T_I", "ms", 50.0, 1.0, 1000.0, "Paper §IV: 50 ms.", step=1.0,
-      group="Controller"),
-    P("derivative_time_ms", "Derivative time T_D", "ms", 3.0, 0.1, 20.0, "Paper §IV: 3 ms.", step=0.1,
-      group="Controller"),
-    P("derivative_filter_us", "Derivative filter τ", "µs", 300.0, 50.0, 3000.0,
-      "Derivative's first-order filter (not in the paper: T_D/10).", step=10.0, group="Controller"),
-    P("feedback", "Feedback source", "", "measured", choices=("measured", "estimated"),
-      description="Position the PID acts on: the sensor's reading or the Kalman filter's estimate "
-                  "(filter model: the paper's rigid rotor, eq. 3-4).", group="Controller"),
+    CAPACITIVE_NOISE,
+    EDDY_CURRENT_NOISE,
+    SENSOR_LAG,
+    *CONTROLLER,
     P("modes", "Modes kept", "", 4, 1, 6, "Modal truncation of the beam model (mode 1: rigid tilting).",
       integer=True, step=1, group="Rotor"),
-    P("modal_damping_percent", "Bending-mode damping ζ", "%", 100 * GEOMETRY.modal_damping, 0.0, 5.0,
-      "Structural damping of the bending modes (not in the paper: 0.5 %).", step=0.1, group="Rotor"),
+    MODAL_DAMPING,
     P("shown_mode", "Mode shown in 3D", "", 3, 1, 6, "Mode shape animated in the 3D view.", integer=True,
       step=1, group="Sensor"),
     P("reference_step_um", "Reference step", "µm", 50.0, -100.0, 100.0,
       "Square-wave reference position (paper Fig. 8: 50 µm).", step=1.0, group="Excitation"),
     P("step_period_ms", "Step period", "ms", 100.0, 10.0, 1000.0, "Period of the reference square wave.",
       step=10.0, group="Excitation"),
-    P("disturbance_force_n", "Unmodelled force σ", "N", DISTURBANCE_FORCE_N, 0.0, 50.0,
-      "Random force at the bearing, per 50 µs sample (process noise).", step=0.1, group="Excitation"),
+    DISTURBANCE_FORCE,
     P("seed", "Random seed", "", 0, 0, 2**31 - 1, "Seed of this lab's noise.", integer=True, step=1,
       group="Run"),
     P("time_scale", "Time scale", "×", 0.02, 0.001, 1.0,
@@ -132,46 +121,20 @@ def _plant(modal_damping: float, sensor_offset_mm: float, modes: int, sensor_lag
                           sensor_lag_s)
 
 
-def integrated(sensor_offset_mm: float) -> bool:
-    """Is the sensor at this position the capacitive one in the bearing's pole gaps?"""
-    return abs(sensor_offset_mm) <= INTEGRATED_HALF_WIDTH_MM
-
-
-def sensor_noise_m(values: dict, sensor_offset_mm: float | None = None) -> float:
-    offset = values["sensor_offset_mm"] if sensor_offset_mm is None else sensor_offset_mm
-    key = "capacitive_noise_um" if integrated(offset) else "eddy_current_noise_um"
-    return values[key] * 1e-6
-
-
-@lru_cache(maxsize=64)
-def _filter(sensor_lag_s: float, noise_m: float, force_n: float):
-    """Filter model (the paper's rigid axis, eq. 3-4, 12) and its steady-state gain (eq. 2)."""
-    model = RIG.discrete_model(sensor_lag_s)
-    n = model.nstates
-    Q = np.zeros((n, n))
-    Q[1, 1] = max(force_n * T / RIG.equivalent_mass_kg, 1e-9) ** 2
-    Q[2, 2] = AMPLIFIER_NOISE_A**2
-    R = np.diag([max(K_MX * noise_m, 1e-6) ** 2, (K_MI * CURRENT_NOISE_A) ** 2])
-    gain, _ = analysis.steady_state_kalman(model, Q, R)
-    return model, gain, Q, R
-
-
 def compensator(values: dict, gain_factor: float | None = None,
                 sensor_offset_mm: float | None = None) -> control.StateSpace:
     """PID (scaled by the gain factor) on the measurement or on the filter's estimate."""
-    factor = values["gain_factor"] if gain_factor is None else gain_factor
-    controller = pid_from_values(values) * factor
+    controller = scaled_pid(values, gain_factor)
     if values["feedback"] == "measured":
         return pid_compensator(controller)
-    model, gain, _, _ = _filter(values["sensor_lag_us"] * 1e-6, sensor_noise_m(values, sensor_offset_mm),
-                                values["disturbance_force_n"])
+    model, gain, _, _ = filter_for(values, sensor_offset_mm)
     return kalman_compensator(controller, model, gain)
 
 
 def plant(values: dict, sensor_offset_mm: float | None = None) -> control.StateSpace:
     offset = values["sensor_offset_mm"] if sensor_offset_mm is None else sensor_offset_mm
     return _plant(values["modal_damping_percent"] / 100, float(offset), int(values["modes"]),
-                  values["sensor_lag_us"] * 1e-6)
+                  in_si(PARAMETERS, values)["sensor_lag_us"])
 
 
 def loop_at_plant_input(values: dict) -> control.StateSpace:
@@ -232,8 +195,9 @@ def plant_mode_names(values: dict, poles_s: np.ndarray) -> list[str | None]:
     one real pole each (the plant is block triangular)."""
     n = int(values["modes"])
     r = rotor(values["modal_damping_percent"] / 100)
-    lag = values["sensor_lag_us"] * 1e-6
-    A = np.asarray(modal_plant(r, GEOMETRY.bearing_m + values["sensor_offset_mm"] * 1e-3, n, lag).A)
+    si = in_si(PARAMETERS, values)
+    lag = si["sensor_lag_us"]
+    A = np.asarray(modal_plant(r, GEOMETRY.bearing_m + si["sensor_offset_mm"], n, lag).A)
     s, vectors = np.linalg.eig(A[:2 * n, :2 * n])
     omega = 2 * np.pi * r.natural_frequencies_hz(n)
     energy = np.abs(vectors[:n]) ** 2 * (omega[:, None] ** 2 + np.abs(s)[None, :] ** 2)
@@ -323,7 +287,7 @@ def pole_paths(values: dict) -> np.ndarray:
 def step_response(values: dict, duration_s: float = 0.03):
     """Reference step (``reference_step_um``, or 50 µm if zero) of the noise-free loop:
     time [s], rotor at the bearing [m], sensor reading [m]; cut at touchdown."""
-    step_m = (values["reference_step_um"] or 50.0) * 1e-6
+    step_m = in_si(PARAMETERS, values)["reference_step_um"] or 50.0 * 1e-6
     response = control.step_response(loop(values), T=np.arange(0.0, duration_s, T), input=0)
     outputs = np.asarray(response.outputs).reshape(len(LOOP_OUTPUTS), -1) * step_m
     bearing = outputs[LOOP_OUTPUTS.index("x_bearing_m")]
@@ -338,7 +302,8 @@ def step_response(values: dict, duration_s: float = 0.03):
 
 def simulation_inputs(values: dict):
     """Square-wave reference (first half of each period zero); no deterministic force."""
-    step_m, period_s = values["reference_step_um"] * 1e-6, values["step_period_ms"] * 1e-3
+    si = in_si(PARAMETERS, values)
+    step_m, period_s = si["reference_step_um"], si["step_period_ms"]
 
     def inputs(first_step: int, n_steps: int):
         t = (first_step + np.arange(n_steps)) * T
@@ -416,6 +381,9 @@ class SensorPlacement(Exercise):
         states += estimate + controller_states(controller, V)
         return {"closed loop": (analysis.change_basis(A, basis), states, T)}
 
+    def pole_categories(self, values: dict) -> dict[str, PoleCategory]:
+        return {"open-loop plant": PoleCategory.PLANT, "closed loop": PoleCategory.CLOSED_LOOP}
+
     def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
         """The rotor's modes by name in the plant and the closed loop (``mode_poles``: by modal
         energy), the amplifier and sensor lag in the plant; the controller's and the filter's
@@ -428,8 +396,9 @@ class SensorPlacement(Exercise):
     def model(self, values: dict) -> dict:
         r = rotor(values["modal_damping_percent"] / 100)
         n = int(values["modes"])
-        z_s = GEOMETRY.bearing_m + values["sensor_offset_mm"] * 1e-3
-        continuous = modal_plant(r, z_s, n, values["sensor_lag_us"] * 1e-6)
+        si = in_si(PARAMETERS, values)
+        z_s = GEOMETRY.bearing_m + si["sensor_offset_mm"]
+        continuous = modal_plant(r, z_s, n, si["sensor_lag_us"])
         discrete = plant(values)
         return {
             "states": [f"eta_{j + 1} [m·kg^0.5]" for j in range(n)] + [f"eta_{j + 1}' [m·kg^0.5/s]" for j in range(n)]
@@ -477,9 +446,10 @@ class SensorPlacement(Exercise):
                   "(mode 1 is the rigid tilting about the ball bearing).")]
         if not stable(closed):
             notes.insert(0, f"Unstable: {unstable_mode_sentence(modes_s)}.")
+        si = in_si(PARAMETERS, values)
         poles = {"open-loop plant": np.linalg.eigvals(np.asarray(
-                     modal_plant(r, GEOMETRY.bearing_m + values["sensor_offset_mm"] * 1e-3, n,
-                                 values["sensor_lag_us"] * 1e-6).A)),
+                     modal_plant(r, GEOMETRY.bearing_m + si["sensor_offset_mm"], n,
+                                 si["sensor_lag_us"]).A)),
                  "closed loop": continuous_poles(closed)}
         return Analysis(readouts, poles, notes=notes, plots=self._plots(values))
 

@@ -39,7 +39,7 @@ from lab_modules.estimators.fuzzy_basis_network import (
     training_grid,
 )
 from lab_modules.estimators.stiffness_identification import lsm_factors
-from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises import Analysis, Chart, Exercise, Plot, PoleCategory, Series
 from lab_modules.exercises._stiffness_networks import (
     NETWORK_CONTROLS,
     NOISE_SEED,
@@ -56,7 +56,7 @@ from lab_modules.loops.axial_bearing_loop import (
     column,
     loop_at_plant_input,
 )
-from lab_modules.parameters import Parameter
+from lab_modules.parameters import Parameter, in_si
 from lab_modules.plants.axial_bearing import (
     AXIAL,
     GRID_CURRENTS_A,
@@ -123,7 +123,8 @@ def table_matches(ki: np.ndarray, ks_mm: np.ndarray) -> tuple[int, int]:
 
 def node(values: dict) -> tuple[float, float]:
     """The chosen operating point (i [A], x [m])."""
-    return float(values["node_current_a"]), float(values["node_position_mm"]) * 1e-3
+    si = in_si(PARAMETERS, values)
+    return si["node_current_a"], si["node_position_mm"]
 
 
 # -- FBFNN ---------------------------------------------------------------------------------------
@@ -502,7 +503,7 @@ class StiffnessMap(Exercise):
                 "centre_ki_n_per_a": k_i, "centre_ks_n_per_mm": k_s / N_PER_MM,
                 "grid_currents_a": GRID_CURRENTS_A.tolist(), "grid_positions_mm": (GRID_POSITIONS_M * 1e3).tolist(),
                 "lsm": {"model": "F = k_i i + k_s x" + (" + c" if values["fit"] == "with_intercept" else ""),
-                        "stencil_a": values["stencil_current_ma"] * 1e-3,
+                        "stencil_a": in_si(PARAMETERS, values)["stencil_current_ma"],
                         "stencil_mm": values["stencil_position_um"] * 1e-3, "samples": 9},
                 "fbfnn": {"rules": 25, "inputs": ["i / 1.5 A", "x / 0.5 mm"], "trained": "widths"
                           + (" and weights" if values["fbfnn_train_weights"] == "on" else "")},
@@ -513,6 +514,9 @@ class StiffnessMap(Exercise):
         """The PID that holds the rotor at the centre (on the FBFNN filter's estimate), k_Magnet before its step."""
         setup_ = loop_setup(values, networks(values))
         return {f"PID on {setup_.feedback}": loop_at_plant_input(setup_)}
+
+    def pole_categories(self, values: dict) -> dict[str, PoleCategory]:
+        return {"ADALINE weight error (rotor's weight)": PoleCategory.FILTER_ERROR}
 
     def analyse(self, values: dict):
         ki, ks_mm = identified_tables(values)

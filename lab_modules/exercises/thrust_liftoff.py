@@ -36,7 +36,7 @@ import numpy as np
 from lab_modules import analysis
 from lab_modules.claims import Claim
 from lab_modules.estimators.thrust_kalman import PAPER_Q_N2, H
-from lab_modules.exercises import Analysis, Chart, Exercise, Plot, Series
+from lab_modules.exercises import Analysis, Chart, Exercise, Plot, PoleCategory, Series
 from lab_modules.exercises._common import pairs
 from lab_modules.loops.thrust_liftoff_loop import (
     ThrustSetup,
@@ -45,7 +45,7 @@ from lab_modules.loops.thrust_liftoff_loop import (
     linear_loop,
     loop_at_plant_input,
 )
-from lab_modules.parameters import Parameter
+from lab_modules.parameters import Parameter, in_si
 from lab_modules.plants.thrust_bearing import TABLE_1
 from lab_modules.scenes.thrust_bearing import ThrustBearingScene
 
@@ -119,23 +119,24 @@ PARAMETERS = (
 
 def setup(values: dict, **changes) -> ThrustSetup:
     """The experiment described by the parameter values (the paper's mm read as SI)."""
+    si = in_si(PARAMETERS, values)
     s = ThrustSetup(
-        proportional_a_per_m=values["kp_a_per_mm"] / MM,
-        integral_a_per_m_s=values["ki_a_per_mm_s"] / MM,
-        derivative_a_s_per_m=values["kd_a_s_per_mm"] / MM,
-        derivative_filter_s=values["derivative_filter_ms"] * 1e-3,
+        proportional_a_per_m=si["kp_a_per_mm"],
+        integral_a_per_m_s=si["ki_a_per_mm_s"],
+        derivative_a_s_per_m=si["kd_a_s_per_mm"],
+        derivative_filter_s=si["derivative_filter_ms"],
         current_limit_a=values["current_limit_a"],
         use_estimate=values["feedback"] == "estimated",
         derivative_from_velocity=values["derivative_source"] == "velocity",
         current_loop=values["current_loop"] == "on",
         nonlinear=values["force_law"] == "nonlinear",
         vertical=values["orientation"] == "vertical",
-        sensor_noise_m=values["sensor_noise_um"] * 1e-6,
-        sensor_noise_correlation_s=values["noise_correlation_ms"] * 1e-3,
+        sensor_noise_m=si["sensor_noise_um"],
+        sensor_noise_correlation_s=si["noise_correlation_ms"],
         force_noise_n=values["force_noise_n"],
         filter_q_n2=values["filter_q_n2"],
         filter_r_factor=values["filter_r_factor"],
-        start_position_m=values["start_position_mm"] * MM)
+        start_position_m=si["start_position_mm"])
     return replace(s, **changes)
 
 
@@ -398,6 +399,10 @@ class ThrustLiftoff(Exercise):
                 "filter error": ((np.eye(2) - np.outer(gain, H)) @ Phi,
                                  [("x error [m]", "position/velocity estimate error"),
                                   ("v error [m/s]", "position/velocity estimate error")], T)}
+
+    def pole_categories(self, values: dict) -> dict[str, PoleCategory]:
+        return {"open-loop plant": PoleCategory.PLANT, "closed loop with G(s)": PoleCategory.CLOSED_LOOP,
+                "closed loop without G(s)": PoleCategory.CLOSED_LOOP, "filter error": PoleCategory.FILTER_ERROR}
 
     def mode_names(self, values: dict, poles: dict[str, np.ndarray]) -> dict[str, list[str | None]]:
         """The open-loop plant's two poles (``analyse`` lists +a, then −a) by name."""

@@ -22,11 +22,15 @@ act on the loop): 0 fixed k_i, k_s (centre values, §B); 1 scheduled by the FBFN
 The SISO ADALINE (eq. 24) identifies k_Magnet from (i, measured x) and a measured
 magnet force with white noise of σ_F (lab choice: the paper's target is the
 MISO ADALINE's force estimate).
+
+The kernel takes named bundles: ``Schedule``, ``AxialPID``, ``FilterBank`` and
+``Identification``.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import control
 import numpy as np
@@ -38,7 +42,16 @@ from lab_modules.estimators.adaline import siso_step
 from lab_modules.estimators.fuzzy_basis_network import CENTRES, evaluate
 from lab_modules.estimators.kalman import correction
 from lab_modules.estimators.scheduled_kalman import (
+    BIAS,
+    GAP,
+    GRAVITY,
+    K_MAGNET,
+    MASS,
     N_STATES,
+    SAMPLE,
+    SENSOR_GAIN,
+    SENSOR_LAG,
+    VAR_SENSOR,
     correct,
     model_matrices,
     physics_vector,
@@ -118,12 +131,13 @@ class LoopSetup:
     def schedule(self) -> np.ndarray:
         return np.array([[s.start_s, s.reference_m, s.disturbance_n, s.k_magnet_factor] for s in self.segments])
 
-    def controller(self) -> np.ndarray:
+    def controller(self) -> AxialPID:
         k_i, _ = AXIAL.centre_factors()
-        source = -1 if self.feedback == "measured" else FILTERS.index(self.feedback)
-        return np.array([self.proportional_a_per_m, self.integral_time_s, self.derivative_a_s_per_m,
-                         self.derivative_filter_s, self.reference_filter_s,
-                         AXIAL.mass_kg * self.gravity / k_i, source])
+        return AxialPID(proportional_a_per_m=self.proportional_a_per_m, integral_time_s=self.integral_time_s,
+                        derivative_a_s_per_m=self.derivative_a_s_per_m, derivative_filter_s=self.derivative_filter_s,
+                        reference_filter_s=self.reference_filter_s,
+                        feedforward_a=AXIAL.mass_kg * self.gravity / k_i,
+                        feedback=-1 if self.feedback == "measured" else FILTERS.index(self.feedback))
 
 
 # state vector layout
@@ -131,33 +145,98 @@ class LoopSetup:
 N_LOOP_STATE = 12
 
 
-@njit(cache=True, nogil=True)
-def _derivatives(x, v, xm, current, load, k_magnet, mass, gravity, gap, bias, sensor_lag, sensor_gain):
-    accel = (magnet_force(current, x, k_magnet, gap, bias) + load) / mass - gravity
-    return v, accel, (sensor_gain * x - xm) / sensor_lag
+class Schedule(NamedTuple):
+    """The plant's programme: segments that repeat with a period, a load that ramps in."""
+
+    segments: np.ndarray      # (n, 4) per segment: start [s], position reference [m], disturbance F_St [N],
+    #                           factor on k_Magnet [-] (``LoopSetup.schedule``)
+    period_s: float           # the schedule repeats after this time [s]
+    load_ramp_s: float        # a new disturbance force ramps in linearly over this time [s]
+    k_magnet: float           # the plant's k_Magnet before the segments' factor [N m²/A²]
+
+
+class AxialPID(NamedTuple):
+    """The lab's PID (module docstring), SI units."""
+
+    proportional_a_per_m: float   # K_P [A/m]
+    integral_time_s: float        # T_I [s]
+    derivative_a_s_per_m: float   # K_D [A s/m]
+    derivative_filter_s: float    # τ_D of the derivative of the measured position [s]
+    reference_filter_s: float     # time constant of the first-order reference filter [s]
+    feedforward_a: float          # gravity feed-forward m g / k_i(centre) [A]
+    feedback: int                 # -1: the measured position; else the index in ``FILTERS`` fed back
+
+
+class FilterBank(NamedTuple):
+    """The four filters of ``FILTERS``, side by side, states (x [m], v [m/s], F_St [N], x_M [V])."""
+
+    z: np.ndarray   # (N_FILTERS, 4) estimates, in place [m, m/s, N, V]
+    P: np.ndarray   # (N_FILTERS, 4, 4) error covariances, in place [state unit x state unit]
+
+
+class Identification(NamedTuple):
+    """The online identification of the force factors: FBFNN (§D), exact LSM, SISO ADALINE (eq. 24)."""
+
+    centres: np.ndarray       # (n_nodes, 2) FBFNN node centres (i / 1.5 A, x / 0.5 mm) [-]
+    ki_weights: np.ndarray    # (n_nodes,) FBFNN weights of k_i [N/A]
+    ki_widths: np.ndarray     # (n_nodes,) their widths [-]
+    ks_weights: np.ndarray    # (n_nodes,) FBFNN weights of k_s [N/m]
+    ks_widths: np.ndarray     # (n_nodes,) their widths [-]
+    stencil_a: float          # LSM stencil in the current [A]
+    stencil_m: float          # LSM stencil in the position [m]
+    adaline_rate: float       # η of eq. 24 in the paper's units (φ [A²/mm²], k_Magnet [N mm²/A²])
+
+
+class AxialRig(NamedTuple):
+    """The rig's constants the plant's rates need (``_derivatives``)."""
+
+    mass_kg: float                # rotor mass m [kg]
+    gravity_m_per_s2: float       # g [m/s²]
+    gap_m: float                  # nominal air gap s0 [m]
+    bias_current_a: float         # bias current i0 [A]
+    sensor_lag_s: float           # T_Sen of eq. 18 [s]
+    sensor_gain_v_per_m: float    # K_Sen of eq. 18 [V/m]
 
 
 @njit(cache=True, nogil=True)
-def run(n_steps, state, filter_z, filter_P, physics, schedule, period, load_ramp, controller, k_magnet_nominal,
-        stencil, fbf_ki_w, fbf_ki_s, fbf_ks_w, fbf_ks_s, centres, adaline, noise, out):
+def _derivatives(x, v, xm, current, load, k_magnet, rig):
+    """Rates of x [m], v [m/s] and the sensor output x_M [V] (eq. 1-2, 18) for the plant's k_Magnet."""
+    accel = (magnet_force(current, x, k_magnet, rig.gap_m, rig.bias_current_a) + load) / rig.mass_kg - rig.gravity_m_per_s2
+    return v, accel, (rig.sensor_gain_v_per_m * x - xm) / rig.sensor_lag_s
+
+
+@njit(cache=True, nogil=True)
+def run(n_steps, state, physics, schedule, pid, filters, identification, noise, out):
     """Advance ``n_steps`` samples; writes rows (time, *COLUMNS) into ``out``;
-    returns the number of rows written (fewer after a touchdown)."""
-    T = physics[1]
-    mass, gravity = physics[0], physics[4]
-    sensor_lag, sensor_gain = physics[2], physics[3]
-    gap, bias = physics[9], physics[10]
+    returns the number of rows written (fewer after a touchdown).
+
+    state : (N_LOOP_STATE,) the loop's state (indices ``S_T`` ...), in place;
+    physics : ``scheduled_kalman.physics_vector`` of the filters' model (indices ``MASS`` ...);
+    schedule : ``Schedule``; pid : ``AxialPID``; filters : ``FilterBank`` (in place);
+    identification : ``Identification``;
+    noise : (n_steps, 4) draws: sensor [V], current [A], measured force [N], force random walk [N]."""
+    # every field read once, before the loop: an array read out of a bundle inside the loop
+    # would cost a reference count per sample
+    segments, period, load_ramp = schedule.segments, schedule.period_s, schedule.load_ramp_s
+    k_magnet_nominal, filter_z, filter_P = schedule.k_magnet, filters.z, filters.P
+    centres, fbf_ki_w, fbf_ki_s = identification.centres, identification.ki_weights, identification.ki_widths
+    fbf_ks_w, fbf_ks_s = identification.ks_weights, identification.ks_widths
+    stencil_a, stencil_m, adaline_rate = identification.stencil_a, identification.stencil_m, identification.adaline_rate
+    T, sensor_gain, gap, bias = physics[SAMPLE], physics[SENSOR_GAIN], physics[GAP], physics[BIAS]
+    rig = AxialRig(mass_kg=physics[MASS], gravity_m_per_s2=physics[GRAVITY], gap_m=gap, bias_current_a=bias,
+                   sensor_lag_s=physics[SENSOR_LAG], sensor_gain_v_per_m=sensor_gain)
     A = np.zeros((N_STATES, N_STATES))
     B = np.zeros((N_STATES, 2))
     Q = np.zeros((N_STATES, N_STATES))
     A_fixed = np.zeros((N_STATES, N_STATES))
     B_fixed = np.zeros((N_STATES, 2))
     Q_fixed = np.zeros((N_STATES, N_STATES))
-    ki0 = 4 * physics[8] * bias / gap**2
-    ks0 = 4 * physics[8] * bias**2 / gap**3
+    ki0 = 4 * physics[K_MAGNET] * bias / gap**2
+    ks0 = 4 * physics[K_MAGNET] * bias**2 / gap**3
     model_matrices(ki0, ks0, physics, A_fixed, B_fixed)
     process_noise(physics, B_fixed, Q_fixed)
-    kp, ti, kd, tf, tr, i_ff = controller[0], controller[1], controller[2], controller[3], controller[4], controller[5]
-    feedback = int(controller[6])
+    kp, ti, kd = pid.proportional_a_per_m, pid.integral_time_s, pid.derivative_a_s_per_m
+    tf, tr, i_ff, feedback = pid.derivative_filter_s, pid.reference_filter_s, pid.feedforward_a, pid.feedback
     h = T / RK4_SUBSTEPS
     for k in range(n_steps):
         if state[S_STOPPED] > 0:
@@ -166,18 +245,18 @@ def run(n_steps, state, filter_z, filter_P, physics, schedule, period, load_ramp
         # schedule (repeats with the period)
         tau = t % period
         seg = 0
-        for j in range(schedule.shape[0]):
-            if tau >= schedule[j, 0] - 1e-12:
+        for j in range(segments.shape[0]):
+            if tau >= segments[j, 0] - 1e-12:
                 seg = j
-        reference, load, k_factor = schedule[seg, 1], schedule[seg, 2], schedule[seg, 3]
+        reference, load, k_factor = segments[seg, 1], segments[seg, 2], segments[seg, 3]
         if seg > 0:
-            previous = schedule[seg - 1, 2]
+            previous = segments[seg - 1, 2]
         elif t >= period:
-            previous = schedule[schedule.shape[0] - 1, 2]     # the schedule wraps round
+            previous = segments[segments.shape[0] - 1, 2]     # the schedule wraps round
         else:
             previous = load
-        if load_ramp > 0.0 and tau - schedule[seg, 0] < load_ramp:
-            load = previous + (load - previous) * (tau - schedule[seg, 0]) / load_ramp
+        if load_ramp > 0.0 and tau - segments[seg, 0] < load_ramp:
+            load = previous + (load - previous) * (tau - segments[seg, 0]) / load_ramp
         k_magnet = k_magnet_nominal * k_factor
         load += state[S_WALK]
         state[S_WALK] += noise[k, 3]
@@ -186,7 +265,7 @@ def run(n_steps, state, filter_z, filter_P, physics, schedule, period, load_ramp
         x_meas = y / sensor_gain
         # filters: correction with y(k)
         for f in range(4):
-            correct(filter_z[f], filter_P[f], y, physics[7])
+            correct(filter_z[f], filter_P[f], y, physics[VAR_SENSOR])
         # controller: PID on the chosen position (derivative from the filter's velocity)
         state[S_REF] += (reference - state[S_REF]) * T / tr
         if feedback < 0:
@@ -216,7 +295,7 @@ def run(n_steps, state, filter_z, filter_P, physics, schedule, period, load_ramp
         # ADALINE (SISO, paper units: A, mm, N)
         force_true = magnet_force(current, x, k_magnet, gap, bias)
         phi_mm = force_shape(current, position, gap, bias) * 1e-6
-        state[S_ADALINE] = siso_step(state[S_ADALINE], phi_mm, force_true + noise[k, 2], adaline[0])
+        state[S_ADALINE] = siso_step(state[S_ADALINE], phi_mm, force_true + noise[k, 2], adaline_rate)
         # record (a posteriori estimates at k)
         row = out[k]
         row[0] = t
@@ -246,7 +325,7 @@ def run(n_steps, state, filter_z, filter_P, physics, schedule, period, load_ramp
         process_noise(physics, B, Q)
         predict_linear(filter_z[1], filter_P[1], A, B, Q, command)
         # 2 exact LSM
-        ki_l, ks_l = lsm_factors_at(command, filter_z[2][0], stencil[0], stencil[1], physics[8], gap, bias)
+        ki_l, ks_l = lsm_factors_at(command, filter_z[2][0], stencil_a, stencil_m, physics[K_MAGNET], gap, bias)
         row[27] = ki_l
         row[28] = ks_l
         model_matrices(ki_l, ks_l, physics, A, B)
@@ -258,13 +337,13 @@ def run(n_steps, state, filter_z, filter_P, physics, schedule, period, load_ramp
         row[30] = k_magnet * 1e6
         # plant: RK4 over the sample, current held
         for _ in range(RK4_SUBSTEPS):
-            d1 = _derivatives(x, v, xm, current, load, k_magnet, mass, gravity, gap, bias, sensor_lag, sensor_gain)
+            d1 = _derivatives(x, v, xm, current, load, k_magnet, rig)
             d2 = _derivatives(x + 0.5 * h * d1[0], v + 0.5 * h * d1[1], xm + 0.5 * h * d1[2], current, load,
-                              k_magnet, mass, gravity, gap, bias, sensor_lag, sensor_gain)
+                              k_magnet, rig)
             d3 = _derivatives(x + 0.5 * h * d2[0], v + 0.5 * h * d2[1], xm + 0.5 * h * d2[2], current, load,
-                              k_magnet, mass, gravity, gap, bias, sensor_lag, sensor_gain)
+                              k_magnet, rig)
             d4 = _derivatives(x + h * d3[0], v + h * d3[1], xm + h * d3[2], current, load,
-                              k_magnet, mass, gravity, gap, bias, sensor_lag, sensor_gain)
+                              k_magnet, rig)
             x += h / 6 * (d1[0] + 2 * d2[0] + 2 * d3[0] + d4[0])
             v += h / 6 * (d1[1] + 2 * d2[1] + 2 * d3[1] + d4[1])
             xm += h / 6 * (d1[2] + 2 * d2[2] + 2 * d3[2] + d4[2])
@@ -295,11 +374,14 @@ class LoopSimulation:
 
     def _arrays(self, setup: LoopSetup) -> None:
         self.physics = setup.physics()
-        self.schedule = setup.schedule()
-        self.controller = setup.controller()
-        self.fbf = [np.ascontiguousarray(a, dtype=np.float64) for a in (*setup.fbfnn_ki, *setup.fbfnn_ks)]
-        self.stencil = np.array([setup.stencil_a, setup.stencil_m])
-        self.adaline = np.array([setup.adaline_rate])
+        self.schedule = Schedule(segments=setup.schedule(), period_s=setup.period_s, load_ramp_s=setup.load_ramp_s,
+                                 k_magnet=setup.k_magnet)
+        self.pid = setup.controller()
+        ki_weights, ki_widths, ks_weights, ks_widths = (np.ascontiguousarray(a, dtype=np.float64)
+                                                        for a in (*setup.fbfnn_ki, *setup.fbfnn_ks))
+        self.identification = Identification(centres=CENTRES, ki_weights=ki_weights, ki_widths=ki_widths,
+                                             ks_weights=ks_weights, ks_widths=ks_widths, stencil_a=setup.stencil_a,
+                                             stencil_m=setup.stencil_m, adaline_rate=setup.adaline_rate)
 
     def retuned(self, setup: LoopSetup) -> LoopSimulation:
         """The same running loop with new settings (state, filters and noise stream kept)."""
@@ -319,9 +401,8 @@ class LoopSimulation:
         # a single step (the inspector's) keeps the filters' priors and the measurement for ``filter_state``
         self._last_correction = ((self.filter_z.copy(), self.filter_P.copy(), self.state[S_XM] + noise[0, 0],
                                   self.state[S_T]) if n_steps == 1 else None)
-        n = run(n_steps, self.state, self.filter_z, self.filter_P, self.physics, self.schedule,
-                self.setup.period_s, self.setup.load_ramp_s, self.controller, self.setup.k_magnet, self.stencil,
-                self.fbf[0], self.fbf[1], self.fbf[2], self.fbf[3], CENTRES, self.adaline, noise, out)
+        n = run(n_steps, self.state, self.physics, self.schedule, self.pid,
+                FilterBank(z=self.filter_z, P=self.filter_P), self.identification, noise, out)
         return out[:n]
 
     def filter_state(self) -> dict | None:
@@ -360,8 +441,10 @@ def loop_at_plant_input(setup: LoopSetup) -> control.StateSpace:
     centre values (fixed), the FBFNN's or the exact LSM's there, or the tangent ones (EKF); the
     scheduling's own derivatives are left out.  Amplifier noise and limits are not in it."""
     physics = setup.physics()
-    T, m, gap, bias = physics[1], AXIAL.mass_kg, physics[9], physics[10]
-    kp, ti, kd, tf, _tr, current = setup.controller()[:6]
+    T, m, gap, bias = physics[SAMPLE], AXIAL.mass_kg, physics[GAP], physics[BIAS]
+    pid = setup.controller()
+    kp, ti, kd, tf = pid.proportional_a_per_m, pid.integral_time_s, pid.derivative_a_s_per_m, pid.derivative_filter_s
+    current = pid.feedforward_a
     k_i, k_s = tangent_factors(current, 0.0, setup.k_magnet, gap, bias)
     F = np.array([[0.0, 1.0, 0.0], [k_s / m, 0.0, 0.0],
                   [SENSOR_GAIN_V_PER_M / setup.sensor_lag_s, 0.0, -1.0 / setup.sensor_lag_s]])
@@ -374,10 +457,10 @@ def loop_at_plant_input(setup: LoopSetup) -> control.StateSpace:
             return np.array([integral, derivative, position]), np.array([kp * (-position + integral / ti)
                                                                          - kd * derivative])
         return analysis.loop_at_plant_input(plant, analysis.state_space_from_step(step, 3, 1, T))
-    factors = {"fixed": (4 * physics[8] * bias / gap**2, 4 * physics[8] * bias**2 / gap**3),
+    factors = {"fixed": (4 * physics[K_MAGNET] * bias / gap**2, 4 * physics[K_MAGNET] * bias**2 / gap**3),
                "fbfnn": (evaluate(current, 0.0, CENTRES, *setup.fbfnn_ki), evaluate(current, 0.0, CENTRES, *setup.fbfnn_ks)),
-               "lsm": lsm_factors_at(current, 0.0, setup.stencil_a, setup.stencil_m, physics[8], gap, bias),
-               "ekf": tangent_factors(current, 0.0, physics[8], gap, bias)}[setup.feedback]
+               "lsm": lsm_factors_at(current, 0.0, setup.stencil_a, setup.stencil_m, physics[K_MAGNET], gap, bias),
+               "ekf": tangent_factors(current, 0.0, physics[K_MAGNET], gap, bias)}[setup.feedback]
     A, B, Q = np.zeros((N_STATES, N_STATES)), np.zeros((N_STATES, 2)), np.zeros((N_STATES, N_STATES))
     model_matrices(float(factors[0]), float(factors[1]), physics, A, B)
     process_noise(physics, B, Q)

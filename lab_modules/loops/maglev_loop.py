@@ -13,12 +13,14 @@ Per sample k (the structure of the paper's Fig. 3.1 and App. F):
                filter instead integrates its Kalman-Bucy equations with y_k held
 
 The simulation stops (``status_message``) when the ball strikes the magnet,
-drops out of the field or the filter's numbers stop being finite.
+drops out of the field or the filter's numbers stop being finite.  The kernel
+takes named bundles: ``Ball``, ``MaglevFilter`` and ``MaglevControl``.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 import control
 import numba
@@ -28,7 +30,7 @@ import scipy.linalg
 from lab_modules import analysis
 from lab_modules.controllers.feedback_linearisation import GUARD_CURRENT_A, feedback_gain, linearising_control
 from lab_modules.controllers.lead_lag import LEAD_LAG, LeadLag
-from lab_modules.controllers.pid import controller_step
+from lab_modules.controllers.pid import DiscreteController, controller_step
 from lab_modules.estimators.continuous_discrete_ekf import bucy_step, propagate, update
 from lab_modules.estimators.kalman import correction
 from lab_modules.plants.maglev_ball import TABLE_3_1, MaglevPlant, rk4_step
@@ -182,15 +184,59 @@ class MaglevSetup:
         return feedback_gain(self.poles_rad_per_s)
 
 
+class Ball(NamedTuple):
+    """The simulated ball and coil (eq. 2.10) and its sensor."""
+
+    state: np.ndarray             # (3,) true gap x1 [m], velocity x2 [m/s], coil current x3 [A], in place
+    constants: np.ndarray         # (5,) the true plant's m [kg], L_c [H], R_c [Ω], C [N m²/A²], g [m/s²]
+    process_density: np.ndarray   # (3,) white process noise densities on x1, x2, x3 [m²/s, m²/s³, A²/s]
+    sensor_variance_m2: float     # variance of the position sensor's white noise [m²] (eq. 3.2)
+
+
+class MaglevFilter(NamedTuple):
+    """The EKF (``FILTERS``: continuous-discrete, eq. 2.40-2.45, or continuous-time) on the
+    model's constants; states (x1 [m], x2 [m/s], x3 [A])."""
+
+    kind: int              # index in ``FILTERS``: 0 continuous-discrete, 1 continuous-time, 2 with R_c = r dt
+    x_hat: np.ndarray      # (3,) estimate, in place [m, m/s, A]
+    P: np.ndarray          # (3, 3) error covariance, in place [state unit x state unit]
+    Q: np.ndarray          # (3, 3) process noise spectral densities [m²/s, m²/s³, A²/s on the diagonal]
+    R_m2: float            # measurement variance r [m²]
+    constants: np.ndarray  # (5,) the model's m [kg], L_c [H], R_c [Ω], C [N m²/A²], g [m/s²]
+    substeps: int          # RK4 steps per sample of the continuous-discrete propagation
+
+
+class MaglevControl(NamedTuple):
+    """The controller (``CONTROLLERS``): feedback linearisation on the estimate, or the lead-lag
+    on the measured gap around the equilibrium voltage."""
+
+    kind: int                      # index in ``CONTROLLERS``: 0 linearising, 1 lead-lag
+    gain: np.ndarray               # (3,) k of eq. 2.30 [1/s³, 1/s², 1/s]
+    lead_lag: DiscreteController   # e = y - y_R [m] -> coil voltage [V]
+    u0_v: float                    # equilibrium coil voltage added to the lead-lag's output [V]
+
+
 @numba.njit(nogil=True, cache=True)
-def run(n_steps, t0, x, x_hat, P, xc, refs, noise, p_true, p, k, Q, plant_q, r, dt, controller, filter_kind,
-        substeps, Ac, Bc, Cc, Dc, u0, trace):
+def run(n_steps, t0, dt, ball, ekf, control, refs, noise, trace):
     """Advance the loop by up to n_steps samples (module docstring); returns (steps done, status).
 
-    ``p_true`` are the plant's constants, ``p`` the model's (filter and controller)."""
+    t0 : time of the first sample [s]; dt : sample time [s].
+    ball : ``Ball``, the true plant (its constants ``p_true``) and sensor, stepped in place.
+    ekf : ``MaglevFilter``, the filter on the model's constants ``p``, in place.
+    control : ``MaglevControl``, the controller (the lead-lag's state in place).
+    refs : (n_steps, 4) y_R, y_R', y_R'', y_R''' [m, m/s, m/s², m/s³].
+    noise : (n_steps, 3) standard normal draws: sensor, velocity, current.
+    trace : (n_steps, 1 + len(TRACE_COLUMNS)) output."""
+    # every field read once, before the loop: an array read out of a bundle inside the loop
+    # would cost a reference count per sample
+    x, p_true, plant_q, sensor_variance = ball.state, ball.constants, ball.process_density, ball.sensor_variance_m2
+    filter_kind, x_hat, P, Q, r, p, substeps = ekf.kind, ekf.x_hat, ekf.P, ekf.Q, ekf.R_m2, ekf.constants, ekf.substeps
+    controller, k, u0 = control.kind, control.gain, control.u0_v
+    lead_lag = control.lead_lag
+    xc, Ac, Bc, Cc, Dc = lead_lag.state, lead_lag.A, lead_lag.B, lead_lag.C, lead_lag.D
     gain = np.empty(3)
     x_next = np.empty(3)
-    sigma = np.sqrt(r)
+    sigma = np.sqrt(sensor_variance)
     sq_v, sq_i = np.sqrt(plant_q[1] * dt), np.sqrt(plant_q[2] * dt)
     xc_next = np.empty(xc.shape[0])
     for step in range(n_steps):
@@ -262,13 +308,17 @@ class MaglevSimulation:
         noise = self.rng.standard_normal((n_steps, 3))
         trace = np.empty((n_steps, 1 + len(TRACE_COLUMNS)))
         Q, plant_q = np.asarray(s.filter_Q, dtype=float), np.diag(s.plant_Q).astype(float)
+        ball = Ball(state=self.x, constants=self.true_constants, process_density=plant_q,
+                    sensor_variance_m2=s.sensor_noise_m**2)
+        ekf = MaglevFilter(kind=FILTERS.index(s.filter), x_hat=self.x_hat, P=self.P, Q=Q, R_m2=s.sensor_noise_m**2,
+                           constants=self.constants, substeps=s.filter_substeps)
+        Ac, Bc, Cc, Dc = self.lead_lag
+        control = MaglevControl(kind=CONTROLLERS.index(s.controller), gain=self.k,
+                                lead_lag=DiscreteController(state=self.xc, A=Ac, B=Bc, C=Cc, D=Dc), u0_v=self.u0)
 
         def part(first: int, last: int) -> tuple[int, int]:
-            return run(
-                last - first, (self.steps + first) * self.sample_time_s, self.x, self.x_hat, self.P, self.xc,
-                refs[first:last], noise[first:last], self.true_constants, self.constants, self.k, Q, plant_q,
-                s.sensor_noise_m**2, self.sample_time_s, CONTROLLERS.index(s.controller),
-                FILTERS.index(s.filter), s.filter_substeps, *self.lead_lag, self.u0, trace[first:last])
+            return run(last - first, (self.steps + first) * self.sample_time_s, self.sample_time_s, ball, ekf,
+                       control, refs[first:last], noise[first:last], trace[first:last])
 
         if n_steps == 1:                               # a single step (the inspector's) keeps the prior
             prior = self.x_hat.copy(), self.P.copy()

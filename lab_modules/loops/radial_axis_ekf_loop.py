@@ -10,17 +10,20 @@ T = 50 µs.  Per sample k:
               feedforward (§III-B, after Fig. 4) = -f_z_hat / (k_i K_a): the estimated force
               turned into the current that cancels it, through the rated k_i
 5. filter     prediction with i_ref                                      (eq. 6, 15)
-6. plant      one RK4 sample of eq. 10-12 (``closed_loop._rk4_step``) with the disturbance
+6. plant      one RK4 sample of eq. 10-12 (``radial_axis_loop.rk4_step``) with the disturbance
               force f_z, plus process noise on v and i
 
 The plant is always the nonlinear one of eq. 10-12; the filter is either
 ``extended_kalman.ParameterEKF``'s model (§III-A) or ``DisturbanceEKF``'s (§III-B).
+The kernel takes named bundles: ``radial_axis_loop.Rotor``, ``ExtendedFilter``,
+``pid.DiscreteController``, ``EKFFeedback`` and ``radial_axis_loop.Inputs``/``Noise``.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 import control
 import numba
@@ -28,11 +31,11 @@ import numpy as np
 from scipy.signal import max_len_seq
 
 from lab_modules import analysis
-from lab_modules.controllers.pid import controller_step
+from lab_modules.controllers.pid import DiscreteController, controller_step
 from lab_modules.estimators import extended_kalman as ef
 from lab_modules.estimators.extended_kalman import N_STATES
 from lab_modules.estimators.kalman import correction
-from lab_modules.loops.radial_axis_loop import _rk4_step
+from lab_modules.loops.radial_axis_loop import Inputs, Noise, Rotor, rk4_step
 from lab_modules.plants.radial_bearing import RIG, BearingAxis
 
 OK, DIVERGED, TOUCHDOWN, FILTER_DIVERGED = 0, 1, 2, 3
@@ -48,26 +51,52 @@ TRACE_COLUMNS = ("x_true_m", "x_measured_m", "x_estimated_m", "x_sigma_m", "curr
                  "ki_true_n_per_a", "ki_estimated_n_per_a", "ki_sigma_n_per_a", "nis")
 
 
+class ExtendedFilter(NamedTuple):
+    """The EKF's arrays as the kernel takes them (eq. 6-9 or 14-18), 5 states:
+    (x [m], v [m/s], i [A], k_i [N/A], k_x [N/m]) for ``LINEARISED`` (§III-A) or
+    (x [m], v [m/s], i [A], x_d [m], f_z [N]) for ``NONLINEAR`` (§III-B)."""
+
+    model: int           # ef.LINEARISED or ef.NONLINEAR
+    x_hat: np.ndarray    # (5,) estimate, corrected and predicted in place [state units]
+    P: np.ndarray        # (5, 5) error covariance, in place [state unit x state unit]
+    Q: np.ndarray        # (5, 5) process-noise covariance per sample [state units²]
+    R_diag: np.ndarray   # (2,) sensor noise variances: position [V²], current [V²]
+    C: np.ndarray        # (2, 5) measurement matrix G (eq. 9, 14) [V per state unit]
+    physics: np.ndarray  # (11,) the filter's ``extended_kalman.physics_vector`` (its own sensor lag T_mx [s])
+
+
+class EKFFeedback(NamedTuple):
+    """What the PID acts on, the force feedforward and the amplifier's limit."""
+
+    use_estimate: bool           # feed back K_mx x_hat[0] instead of the measured position
+    feedforward_v_per_n: float   # i_ref [V] per estimated newton of f_z (0: no feedforward)
+    u_limit_v: float             # amplifier input limit [V] (current limit / K_a)
+
+
 @numba.njit(nogil=True, cache=True)
-def run(n_steps, model, plant, plant_physics, x_hat, P, Q, R_diag, C, filter_physics,
-        ctrl, Ac, Bc, Cc, Dc, u_limit, use_estimate, feedforward_v_per_n,
-        reference_m, disturbance_n, noise, noise_sigma, touchdown_m, trace):
+def run(n_steps, rotor, ekf, controller, feedback, inputs, noise, trace):
     """Advance the loop by ``n_steps`` samples (see module docstring).
 
-    plant : (4,) true (x [m], v [m/s], i [A], x_d [m]), in place.
-    plant_physics, filter_physics : ``extended_kalman.physics_vector`` of the
-        plant and of the filter (they differ in T_mx when the filter's lag is wrong).
-    x_hat, P, Q, R_diag, C : the filter's estimate, covariance and model (in place).
-    ctrl, Ac, Bc, Cc, Dc : PID state and discrete matrices (e [V] -> i_ref [V]).
-    u_limit : amplifier input limit [V] (current limit / K_a).
-    feedforward_v_per_n : i_ref per estimated newton (0: no feedforward).
-    reference_m, disturbance_n : (n_steps,) reference position [m], force f_z [N].
-    noise : (n_steps, 4) standard normal draws scaled by noise_sigma =
+    rotor : ``radial_axis_loop.Rotor``, the true (x, v, i, x_d), stepped in place, and the
+        plant's ``extended_kalman.physics_vector`` (it differs from the filter's in T_mx when
+        the filter's lag is wrong).
+    ekf : ``ExtendedFilter``, the filter's model, estimate and covariance (in place).
+    controller : ``pid.DiscreteController``, the PID (e [V] -> i_ref [V]).
+    feedback : ``EKFFeedback``, measured or estimated position, feedforward, amplifier limit.
+    inputs : ``radial_axis_loop.Inputs``, (n_steps,) reference position [m], force f_z [N].
+    noise : ``radial_axis_loop.Noise``, (n_steps, 4) standard normal draws scaled by
         (v [m/s], i [A], sensor x [V], sensor i [V]) per sample.
     trace : (n_steps, len(TRACE_COLUMNS)) output.
 
     Returns (status, steps_done).
     """
+    # every field read once, before the loop: an array read out of a bundle inside the loop
+    # would cost a reference count per sample
+    plant, plant_physics, touchdown_m = rotor.state, rotor.physics, rotor.touchdown_m
+    model, x_hat, P, Q, R_diag, C, filter_physics = ekf.model, ekf.x_hat, ekf.P, ekf.Q, ekf.R_diag, ekf.C, ekf.physics
+    ctrl, Ac, Bc, Cc, Dc = controller.state, controller.A, controller.B, controller.C, controller.D
+    use_estimate, feedforward_v_per_n, u_limit = feedback.use_estimate, feedback.feedforward_v_per_n, feedback.u_limit_v
+    reference_m, disturbance_n, draws, noise_sigma = inputs.reference_m, inputs.disturbance_n, noise.draws, noise.sigma
     T, Tmx, K_mx, K_mi = plant_physics[8], plant_physics[7], plant_physics[9], plant_physics[10]
     y, gain = np.empty(2), np.empty((2, N_STATES))
     F, Phi, work = np.empty((N_STATES, N_STATES)), np.empty((N_STATES, N_STATES)), \
@@ -77,12 +106,12 @@ def run(n_steps, model, plant, plant_physics, x_hat, P, Q, R_diag, C, filter_phy
     nan = np.nan
     for k in range(n_steps):
         # 1.-2. sensors and filter correction
-        y[0] = K_mx * plant[3] + noise_sigma[2] * noise[k, 2]
-        y[1] = K_mi * plant[2] + noise_sigma[3] * noise[k, 3]
+        y[0] = K_mx * plant[3] + noise_sigma[2] * draws[k, 2]
+        y[1] = K_mi * plant[2] + noise_sigma[3] * draws[k, 3]
         nis = ef.update(x_hat, P, C, y, R_diag, gain, N_STATES)
         # 3.-4. feedback, PID and feedforward
-        feedback = K_mx * x_hat[0] if use_estimate else y[0]
-        e = K_mx * reference_m[k] - feedback
+        fed_back = K_mx * x_hat[0] if use_estimate else y[0]
+        e = K_mx * reference_m[k] - fed_back
         feedforward = feedforward_v_per_n * x_hat[4] if model == ef.NONLINEAR else 0.0
         u = controller_step(e, feedforward, u_limit, ctrl, Ac, Bc, Cc, Dc, work_ctrl)
         row = trace[k]
@@ -103,11 +132,11 @@ def run(n_steps, model, plant, plant_physics, x_hat, P, Q, R_diag, C, filter_phy
             row[11], row[14] = ef.factors_from_phi(Phi, filter_physics)
             row[12], row[15] = nan, nan
         # 6. plant
-        _rk4_step(plant, u, disturbance_n[k], plant_physics, T, k1, k2, k3, k4, tmp)
+        rk4_step(plant, u, disturbance_n[k], plant_physics, T, k1, k2, k3, k4, tmp)
         if Tmx <= 0.0:
             plant[3] = plant[0]
-        plant[1] += noise_sigma[0] * noise[k, 0]
-        plant[2] += noise_sigma[1] * noise[k, 1]
+        plant[1] += noise_sigma[0] * draws[k, 0]
+        plant[2] += noise_sigma[1] * draws[k, 1]
         if not (np.isfinite(plant[0]) and np.isfinite(plant[1])):
             return DIVERGED, k + 1
         if not (np.isfinite(x_hat[0]) and np.isfinite(P[0, 0]) and np.isfinite(x_hat[3])
@@ -291,12 +320,18 @@ class EKFLoopSimulation:
         noise = self.rng.standard_normal((n_steps, 4))
         trace = np.empty((n_steps, len(TRACE_COLUMNS)))
 
+        rotor = Rotor(state=self.plant, physics=self._plant_physics, touchdown_m=setup.rig.touchdown_m)
+        ekf = ExtendedFilter(model=setup.model, x_hat=self.x_hat, P=self.P, Q=self._Q, R_diag=self._R_diag,
+                             C=self._C, physics=self._filter_physics)
+        Ac, Bc, Cc, Dc = self._ctrl_matrices
+        controller = DiscreteController(state=self.ctrl, A=Ac, B=Bc, C=Cc, D=Dc)
+        feedback = EKFFeedback(use_estimate=setup.use_estimate, feedforward_v_per_n=self._feedforward,
+                               u_limit_v=self._u_limit)
+
         def part(first: int, last: int) -> tuple[int, int]:
-            return run(last - first, setup.model, self.plant, self._plant_physics, self.x_hat, self.P,
-                       self._Q, self._R_diag, self._C, self._filter_physics,
-                       self.ctrl, *self._ctrl_matrices, self._u_limit, setup.use_estimate,
-                       self._feedforward, reference[first:last], disturbance[first:last], noise[first:last],
-                       setup.noise_sigma, setup.rig.touchdown_m, trace[first:last])
+            return run(last - first, rotor, ekf, controller, feedback,
+                       Inputs(reference_m=reference[first:last], disturbance_n=disturbance[first:last]),
+                       Noise(draws=noise[first:last], sigma=setup.noise_sigma), trace[first:last])
 
         if n_steps == 1:                               # a single step (the inspector's) keeps the prior
             prior, plant = (self.x_hat.copy(), self.P.copy()), self.plant.copy()

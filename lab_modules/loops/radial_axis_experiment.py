@@ -16,6 +16,7 @@ import numpy as np
 import scipy.signal
 
 from lab_modules import analysis
+from lab_modules.controllers.pid import DiscreteController
 from lab_modules.estimators.kalman import KalmanFilter, correction, pad_vector
 from lab_modules.loops import radial_axis_loop
 from lab_modules.plants.radial_bearing import RIG, BearingAxis
@@ -197,16 +198,16 @@ class AxisSimulation:
         self.filter = KalmanFilter(A, B[:, 0], model.C, setup.filter_Q, np.diag(setup.filter_R),
                                    np.zeros(n), initial_P)
         controller = setup.controller
-        self._ctrl_matrices = tuple(np.ascontiguousarray(np.atleast_2d(np.asarray(M, dtype=float)))
+        self.controller_matrices = tuple(np.ascontiguousarray(np.atleast_2d(np.asarray(M, dtype=float)))
                                     for M in (controller.A, controller.B, controller.C, controller.D))
-        self.ctrl = np.zeros(self._ctrl_matrices[0].shape[0])
+        self.ctrl = np.zeros(self.controller_matrices[0].shape[0])
         self._state_gain = pad_vector(np.zeros(0) if setup.state_gain is None else setup.state_gain)
-        self._plant_linear = self._padded_plant(A, B)
-        self._physics = np.array([rig.equivalent_mass_kg, rig.force_factor_n_m2_per_a2, rig.i0_a,
+        self.plant_linear = self._padded_plant(A, B)
+        self.physics = np.array([rig.equivalent_mass_kg, rig.force_factor_n_m2_per_a2, rig.i0_a,
                                   rig.delta0_m, np.cos(rig.pole_angle_rad), rig.amplifier_lag_s,
                                   rig.amplifier_gain_a_per_v, setup.sensor_lag_s, rig.sample_time_s,
                                   rig.position_sensor_gain_v_per_m, rig.current_sensor_gain_v_per_a])
-        self._u_limit = rig.current_limit_a / rig.amplifier_gain_a_per_v
+        self.u_limit_v = rig.current_limit_a / rig.amplifier_gain_a_per_v
         self.step = 0
         self.status = radial_axis_loop.OK
         self._last_correction = None                   # (prior x̂, prior P, y, time) of the last sample
@@ -225,7 +226,7 @@ class AxisSimulation:
         new = AxisSimulation(setup)
         new.rng, new.step, new.plant[:] = self.rng, self.step, self.plant
         if new.filter.dim_x == self.filter.dim_x:
-            new.filter._x[:], new.filter.P[:] = self.filter._x, self.filter.P
+            new.filter.state[:], new.filter.P[:] = self.filter.state, self.filter.P
         if new.ctrl.shape == self.ctrl.shape:
             new.ctrl[:] = self.ctrl
         if (new._reference_filter is not None and self._reference_filter is not None
@@ -266,21 +267,26 @@ class AxisSimulation:
             reference, state[:] = scipy.signal.lfilter(numerator, denominator, reference, zi=state)
         noise = self.noise(n_steps)
         trace = np.empty((n_steps, len(radial_axis_loop.TRACE_COLUMNS) + 1))
-        kf = self.filter
+        kf, setup = self.filter, self.setup
+        rotor = radial_axis_loop.Rotor(state=self.plant, physics=self.physics, touchdown_m=setup.rig.touchdown_m)
+        A, B_u, B_f = self.plant_linear
+        linear_plant = radial_axis_loop.LinearPlant(nonlinear=setup.nonlinear, A=A, B_u=B_u, B_f=B_f)
+        Ac, Bc, Cc, Dc = self.controller_matrices
+        controller = DiscreteController(state=self.ctrl, A=Ac, B=Bc, C=Cc, D=Dc)
+        feedback = radial_axis_loop.Feedback(use_estimate=setup.use_estimate, state_gain=self._state_gain,
+                                             u_limit_v=self.u_limit_v)
 
         def run(first: int, last: int) -> tuple[int, int]:
             return radial_axis_loop.run(
-                last - first, self.step + first, self.plant, *self._plant_linear, self.setup.nonlinear,
-                self._physics, kf._x, kf.P, kf.A, kf.B, kf.C, kf.Q, kf.R_diag,
-                self.ctrl, *self._ctrl_matrices, self._state_gain, self._u_limit, self.setup.use_estimate,
-                reference[first:last], disturbance[first:last], noise[first:last], self.setup.noise_sigma,
-                self.setup.rig.touchdown_m, trace[first:last])
+                last - first, self.step + first, rotor, linear_plant, kf.arrays(), controller, feedback,
+                radial_axis_loop.Inputs(reference_m=reference[first:last], disturbance_n=disturbance[first:last]),
+                radial_axis_loop.Noise(draws=noise[first:last], sigma=setup.noise_sigma), trace[first:last])
 
         if n_steps == 1:                               # a single step (the inspector's) keeps the prior
-            prior = kf._x.copy(), kf.P.copy()
+            prior = kf.state.copy(), kf.P.copy()
             status, done = run(0, 1)
             sigma, row = self.setup.noise_sigma, trace[0]
-            self._last_correction = (*prior, np.array([row[2] * self._physics[9], row[5] * self._physics[10]
+            self._last_correction = (*prior, np.array([row[2] * self.physics[9], row[5] * self.physics[10]
                                                        + sigma[3] * float(noise[0, 3])]), row[0])
         else:
             status, done = run(0, n_steps)

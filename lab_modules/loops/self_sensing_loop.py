@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit, uint64
@@ -46,6 +47,30 @@ COLUMNS = (
 COLUMN = {name: k for k, name in enumerate(COLUMNS)}
 TRAJECTORIES = ("4-6-4 mm", "fixed at gap 1", "fixed at gap 2")
 HOLD_S = 0.35            # time at each operating point between the transitions
+
+
+class PwmRun(NamedTuple):
+    """The set-up of one run as ``run_periods`` takes it (``SelfSensingSetup.pwm_run``), SI units."""
+
+    samples_per_period: int         # n: T_pwm = n T_a [-]
+    sample_time_s: float            # T_a [s]
+    battery_voltage_v: float        # v_bat [V], applied as ±v_bat by the bridge
+    resistance_ohm: float           # coil resistance R [Ω]
+    resistance_estimate_ohm: float  # R̂ of eq. 7 [Ω], negative for the printed v_j + R i_j
+    current_gain: float             # μ of eq. 19 (i = μ i_m) [-]
+    voltage_gain: float             # η of eq. 19 (v = η v_m) [-]
+    current_offset_a: float         # Δi of eq. 23 [A]
+    voltage_offset_v: float         # Δv of eq. 23 [V]
+    sigma_current_a: float          # σ of the current measurement's white noise [A]
+    sigma_voltage_v: float          # σ of the voltage measurement's white noise [V]
+    trim_samples: int               # samples left out at both ends of each phase's window [-]
+    gap_1_m: float                  # first operating point's gap [m]
+    gap_2_m: float                  # second operating point's gap [m]
+    transition_s: float             # duration of a move between them [s]
+    trajectory: int                 # index in ``TRAJECTORIES`` (``gap_at``'s mode)
+    ball_mass_kg: float             # the ball's mass [kg] (its weight sets the duty)
+    dof_sign: float                 # −1: eq. 28 with M − d degrees of freedom; +1: the printed M + d [-]
+    hold_s: float                   # time at each operating point between the moves [s]
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -116,31 +141,29 @@ def run_periods(first_period, n_periods, flux, constants, setup, rng_state, out,
     """Simulate ``n_periods`` PWM periods from period index ``first_period`` and coil
     flux ``flux`` [Wb]; returns the flux at the end.
 
-    setup: [samples per period n, sample time T_a, v_bat, R, R̂ sign·R̂ (eq. 7), μ, η,
-    current offset Δi, voltage offset Δv, σ(i), σ(v), trim, gap_1, gap_2, transition
-    time, trajectory mode, mass, dof sign, hold time].  noise: standard normal
-    (2, n_periods·n).  out: (n_periods, len(COLUMNS)).  raw: (rows, 5) filled with
-    the first rows samples (time, true current, measured current, measured voltage,
-    true voltage)."""
-    n = int(setup[0])
-    ts = setup[1]
-    v_bat = setup[2]
-    r = setup[3]
-    r_hat = setup[4]
-    mu = setup[5]
-    eta = setup[6]
-    di = setup[7]
-    dv = setup[8]
-    sig_i = setup[9]
-    sig_v = setup[10]
-    trim = int(setup[11])
-    gap_1 = setup[12]
-    gap_2 = setup[13]
-    transition = setup[14]
-    mode = int(setup[15])
-    weight = setup[16] * GRAVITY
-    dof_sign = setup[17]
-    hold = setup[18]
+    constants: ``SelfSensingBall.constants``.  setup: ``PwmRun``.  rng_state: the
+    xoshiro256** state of the measurement noise, in place.  out: (n_periods, len(COLUMNS)).
+    raw: (rows, 5) filled with the first rows samples (time, true current, measured current,
+    measured voltage, true voltage)."""
+    n = setup.samples_per_period
+    ts = setup.sample_time_s
+    v_bat = setup.battery_voltage_v
+    r = setup.resistance_ohm
+    r_hat = setup.resistance_estimate_ohm
+    mu = setup.current_gain
+    eta = setup.voltage_gain
+    di = setup.current_offset_a
+    dv = setup.voltage_offset_v
+    sig_i = setup.sigma_current_a
+    sig_v = setup.sigma_voltage_v
+    trim = setup.trim_samples
+    gap_1 = setup.gap_1_m
+    gap_2 = setup.gap_2_m
+    transition = setup.transition_s
+    mode = setup.trajectory
+    weight = setup.ball_mass_kg * GRAVITY
+    dof_sign = setup.dof_sign
+    hold = setup.hold_s
     period_s = n * ts
     current_m = np.empty(n + 1)
     voltage_m = np.empty(n + 1)
@@ -261,15 +284,20 @@ class SelfSensingSetup:
     def period_s(self) -> float:
         return self.samples_per_period * self.sample_time_s
 
-    def vector(self) -> np.ndarray:
+    def pwm_run(self) -> PwmRun:
+        """The set-up as ``run_periods`` takes it (numbers of fixed types: one compiled kernel serves all)."""
         r = self.rig.coil_resistance_ohm
-        r_hat = self.resistance_ratio * r * (-1.0 if self.printed_eq7 else 1.0)
-        v_bat = self.battery_voltage_v or self.rig.battery_voltage_v
-        return np.array([self.samples_per_period, self.sample_time_s, v_bat, r, r_hat, self.current_gain,
-                         self.voltage_gain, self.current_offset_a, self.voltage_offset_v, self.sigma_current_a,
-                         self.sigma_voltage_v, self.trim_samples, self.gap_1_m, self.gap_2_m, self.transition_s,
-                         TRAJECTORIES.index(self.trajectory), self.rig.ball_mass_kg,
-                         1.0 if self.printed_dof else -1.0, HOLD_S])
+        return PwmRun(samples_per_period=int(self.samples_per_period), sample_time_s=float(self.sample_time_s),
+                      battery_voltage_v=float(self.battery_voltage_v or self.rig.battery_voltage_v),
+                      resistance_ohm=float(r),
+                      resistance_estimate_ohm=float(self.resistance_ratio * r * (-1.0 if self.printed_eq7 else 1.0)),
+                      current_gain=float(self.current_gain), voltage_gain=float(self.voltage_gain),
+                      current_offset_a=float(self.current_offset_a), voltage_offset_v=float(self.voltage_offset_v),
+                      sigma_current_a=float(self.sigma_current_a), sigma_voltage_v=float(self.sigma_voltage_v),
+                      trim_samples=int(self.trim_samples), gap_1_m=float(self.gap_1_m), gap_2_m=float(self.gap_2_m),
+                      transition_s=float(self.transition_s), trajectory=TRAJECTORIES.index(self.trajectory),
+                      ball_mass_kg=float(self.rig.ball_mass_kg), dof_sign=1.0 if self.printed_dof else -1.0,
+                      hold_s=HOLD_S)
 
 
 class SelfSensingLoop:
@@ -278,14 +306,14 @@ class SelfSensingLoop:
     def __init__(self, setup: SelfSensingSetup, seed: int = 0):
         self.setup = setup
         self.constants = setup.rig.constants()
-        self.vector = setup.vector()
+        self.pwm_run = setup.pwm_run()
         self.rng_state = np.random.default_rng(seed).integers(1, 2**63, 4, dtype=np.uint64)
         self.period = 0
         gap = gap_at(0.0, setup.gap_1_m, setup.gap_2_m, HOLD_S, setup.transition_s,
                      TRAJECTORIES.index(setup.trajectory))
         # start in the periodic steady state of the first period's duty: the bottom of the ripple
         i_eq = float(setup.rig.equilibrium_current_a(gap))
-        v_bat = self.vector[2]
+        v_bat = self.pwm_run.battery_voltage_v
         r = setup.rig.coil_resistance_ohm
         chi = 0.5 * (1.0 + r * i_eq / v_bat)
         inductance_h = float(setup.rig.inductance_h(gap))
@@ -297,7 +325,7 @@ class SelfSensingLoop:
         n = self.setup.samples_per_period
         out = np.empty((n_periods, len(COLUMNS)))
         raw = np.empty((min(raw_samples, n_periods * n), 5))
-        self.flux = run_periods(self.period, n_periods, self.flux, self.constants, self.vector, self.rng_state,
+        self.flux = run_periods(self.period, n_periods, self.flux, self.constants, self.pwm_run, self.rng_state,
                                  out, raw)
         self.period += n_periods
         return out, raw

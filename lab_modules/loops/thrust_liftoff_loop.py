@@ -21,12 +21,15 @@ Per sample k:
 
 The gains are in SI units here (Kp [A/m] ...); the exercise converts the
 paper's A/mm.  The kernel releases the GIL, so browser tabs run in parallel.
+It takes named bundles: ``Collar``, ``CurrentLoop``, the filter's
+``kalman.LinearFilter``, ``LiftoffPID`` and ``LiftoffNoise``.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from functools import cached_property
+from typing import NamedTuple
 
 import control
 import numba
@@ -86,37 +89,81 @@ def _rk4(s, i, f_ext, c, T):
     s[1] = v + T / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
 
 
-@numba.njit(**JIT)
-def run(n_steps, first_step, T, plant, constants, plant_A, plant_B_force, nonlinear, gravity_n,
-        coil, G_A, G_B, G_C, G_D, use_current_loop,
-        x_hat, P, A_f, B_f, C_f, Q_f, R_diag,
-        pid, gains, use_estimate, derivative_from_velocity,
-        noise, noise_sigma, clearance_m, memory, trace):
-    """Advance the loop by ``n_steps`` samples (module docstring).
+class Collar(NamedTuple):
+    """The thrust collar on its axis (eq. 2-3 or eq. 5) between the touchdown bearing's stops."""
 
-    Arrays are float64 and hold state in place where they say so.
-    plant (2,): true (x [m], v [m/s]); constants (7,): see ``_acceleration``;
-    plant_A (2x2), plant_B_force (2,): exact ZOH discretisation of eq. 5 for a force [N];
-    gravity_n: force of gravity on the axis (0 horizontal, −m g vertical);
-    coil (2,): state of G(s) (G_A 2x2, G_B, G_C (2,), G_D scalar); use_current_loop: False -> i = i_c;
-    x_hat, P, A_f, B_f, C_f, Q_f, R_diag: the filter, padded to ``STATE_SIZE``;
-    pid (3,): integral [A], previous error [m], derivative term [A];
-    gains (5,): Kp [A/m], Ki [A/(m s)], Kd [A s/m], derivative filter coefficient
-    τ_d/(τ_d + T), current limit [A];
-    noise (n_steps, 2): standard normal draws for the sensor and the force;
-    noise_sigma (2,): σ_v [m], σ_f [N];
-    memory (2,): lifted (0/1), samples spent resting on the start stop;
+    state: np.ndarray       # (2,) true x [m], v [m/s], in place
+    constants: np.ndarray   # (7,) m [kg], k_i [N/A], |k_x| [N/m], i0 [A], k_f [N m²/A²], x0 [m],
+    #                         smallest gap [m] (``ThrustBearing.force_constants``, see ``_acceleration``)
+    nonlinear: bool         # eq. 2-3 by RK4; False: the exact ZOH matrices of eq. 5 below
+    A: np.ndarray           # (2, 2) exact discrete eq. 5 on (x, v) [-, s; 1/s, -]
+    B_force: np.ndarray     # (2,) column of a force held over the sample [m/N, m/(s N)]
+    gravity_n: float        # force of gravity on the axis [N]: 0 horizontal, −m g vertical
+    clearance_m: float      # the touchdown bearing stops the collar at ±clearance [m]
+    liftoff: np.ndarray     # (2,) lifted (0/1), samples spent resting on the start stop, in place
+
+
+class CurrentLoop(NamedTuple):
+    """The coil's current loop G(s) of §3.1 (ZOH), command i_c [A] -> coil current i [A]."""
+
+    active: bool        # False: i = i_c
+    state: np.ndarray   # (2,) state of G, in place [the realisation's own units]
+    A: np.ndarray       # (2, 2) state matrix [-]
+    B: np.ndarray       # (2,) input column [A per A]
+    C: np.ndarray       # (2,) output row [A per A]
+    D: float            # feedthrough [A/A]
+
+
+class LiftoffPID(NamedTuple):
+    """The PID of paper 003 (module docstring, step 4), SI gains."""
+
+    state: np.ndarray               # (3,) integral [A], previous error [m], derivative term [A], in place
+    proportional_a_per_m: float     # Kp [A/m]
+    integral_a_per_m_s: float       # Ki [A/(m s)]
+    derivative_a_s_per_m: float     # Kd [A s/m]
+    derivative_filter: float        # τ_d / (τ_d + T) [-] (0: unfiltered backward difference)
+    current_limit_a: float          # the command is clipped at ±limit [A]
+    use_estimate: bool              # feed back the estimate x̂ instead of the measured z
+    derivative_from_velocity: bool  # with the estimate: D = −Kd v̂ on the filter's velocity
+
+
+class LiftoffNoise(NamedTuple):
+    """The noise of one call: standard normal draws and their scales."""
+
+    draws: np.ndarray   # (n_steps, 2) standard normal draws for the sensor and the force [-]
+    sigma: np.ndarray   # (2,) σ_v of the sensor [m], σ_f of the force disturbance [N]
+
+
+@numba.njit(**JIT)
+def run(n_steps, first_step, T, collar, current_loop, kalman, pid, noise, trace):
+    """Advance the loop by ``n_steps`` samples of T [s] (module docstring).
+
+    collar : ``Collar``, the true state, plant and touchdown bearing (state and lift-off in place);
+    current_loop : ``CurrentLoop``, G(s) (state in place);
+    kalman : ``kalman.LinearFilter``, the filter, padded to ``STATE_SIZE`` (in place);
+    pid : ``LiftoffPID``, gains and state (in place);
+    noise : ``LiftoffNoise`` for the sensor and the force;
     trace (n_steps, 1 + len(KERNEL_COLUMNS)) output.
 
     Returns (status, steps_done)."""
+    # every field read once, before the loop: reading an array out of a bundle in the loop
+    # would count a reference per sample
+    plant, constants, memory, clearance_m = collar.state, collar.constants, collar.liftoff, collar.clearance_m
+    nonlinear, plant_A, plant_B_force, gravity_n = collar.nonlinear, collar.A, collar.B_force, collar.gravity_n
+    coil, G_A, G_B, G_C, G_D = current_loop.state, current_loop.A, current_loop.B, current_loop.C, current_loop.D
+    use_current_loop = current_loop.active
+    x_hat, P, A_f, B_f, C_f, Q_f, R_diag = kalman.x_hat, kalman.P, kalman.A, kalman.B, kalman.C, kalman.Q, kalman.R_diag
+    pid_state, use_estimate, derivative_from_velocity = pid.state, pid.use_estimate, pid.derivative_from_velocity
+    draws, noise_sigma = noise.draws, noise.sigma
     y = np.empty(1)
     gain = np.empty((1, STATE_SIZE))
     work_x, work_P = np.empty(STATE_SIZE), np.empty((STATE_SIZE, STATE_SIZE))
-    Kp, Ki, Kd, alpha, limit = gains[0], gains[1], gains[2], gains[3], gains[4]
+    Kp, Ki, Kd = pid.proportional_a_per_m, pid.integral_a_per_m_s, pid.derivative_a_s_per_m
+    alpha, limit = pid.derivative_filter, pid.current_limit_a
     max_rest = MAX_REST_S / T
     for k in range(n_steps):
         # 1. sensor, 2. filter correction
-        z = plant[0] + noise_sigma[0] * noise[k, 0]
+        z = plant[0] + noise_sigma[0] * draws[k, 0]
         y[0] = z
         update(x_hat, P, C_f, y, R_diag, gain, STATE_SIZE)
         # 3. feedback, 4. PID
@@ -124,13 +171,13 @@ def run(n_steps, first_step, T, plant, constants, plant_A, plant_B_force, nonlin
         if use_estimate and derivative_from_velocity:
             raw_d = -Kd * x_hat[1]
         else:
-            raw_d = Kd * (e - pid[1]) / T
-        pid[1] = e
-        pid[2] = alpha * pid[2] + (1.0 - alpha) * raw_d
-        wanted = Kp * e + pid[0] + pid[2]
+            raw_d = Kd * (e - pid_state[1]) / T
+        pid_state[1] = e
+        pid_state[2] = alpha * pid_state[2] + (1.0 - alpha) * raw_d
+        wanted = Kp * e + pid_state[0] + pid_state[2]
         command = min(max(wanted, -limit), limit)
         if command == wanted or wanted * e < 0.0:
-            pid[0] += Ki * T * e
+            pid_state[0] += Ki * T * e
         # 5. current loop
         if use_current_loop:
             i = G_C[0] * coil[0] + G_C[1] * coil[1] + G_D * command
@@ -153,7 +200,7 @@ def run(n_steps, first_step, T, plant, constants, plant_A, plant_B_force, nonlin
         # 6. filter prediction with the measured coil current
         predict(x_hat, P, A_f, B_f, i, Q_f, work_x, work_P)
         # 7. plant and touchdown bearing
-        f_ext = noise_sigma[1] * noise[k, 1] + gravity_n
+        f_ext = noise_sigma[1] * draws[k, 1] + gravity_n
         if nonlinear:
             _rk4(plant, i, f_ext, constants, T)
         else:
@@ -246,6 +293,23 @@ class ThrustSimulation:
         resting = b.touchdown_clearance_m - abs(s.start_position_m) <= LIFT_MARGIN_M
         self.memory = np.array([0.0 if resting else 1.0, 0.0])
         self.launched_at = self.step
+        self._bundle()
+
+    def _bundle(self) -> None:
+        """The kernel's bundles over the simulation's arrays, made when those arrays or the
+        settings change (a call of the kernel may cover a fraction of a millisecond)."""
+        s, b, kf = self.setup, self.setup.bearing, self.filter
+        Phi, Gamma = self._plant
+        self._collar = Collar(state=self.plant, constants=self._constants, nonlinear=s.nonlinear, A=Phi,
+                              B_force=Gamma, gravity_n=s.gravity_n, clearance_m=b.touchdown_clearance_m,
+                              liftoff=self.memory)
+        G_A, G_B, G_C, G_D = self._current
+        self._current_loop = CurrentLoop(active=s.current_loop, state=self.coil, A=G_A, B=G_B, C=G_C, D=G_D)
+        self._kalman = kf.arrays()
+        self._pid = LiftoffPID(state=self.pid, proportional_a_per_m=s.proportional_a_per_m,
+                               integral_a_per_m_s=s.integral_a_per_m_s, derivative_a_s_per_m=s.derivative_a_s_per_m,
+                               derivative_filter=self._derivative_filter, current_limit_a=s.current_limit_a,
+                               use_estimate=s.use_estimate, derivative_from_velocity=s.derivative_from_velocity)
 
     def _configure(self):
         s, b = self.setup, self.setup.bearing
@@ -253,8 +317,7 @@ class ThrustSimulation:
         Phi, _, Gamma = b.exact_discretisation()
         self._plant = (Phi, Gamma)
         self._current = discrete_current_loop(T)
-        self._gains = np.array([s.proportional_a_per_m, s.integral_a_per_m_s, s.derivative_a_s_per_m,
-                                s.derivative_filter_s / (s.derivative_filter_s + T), s.current_limit_a])
+        self._derivative_filter = s.derivative_filter_s / (s.derivative_filter_s + T)
         self._sigma = np.array([s.sensor_noise_m, s.force_noise_n]) if s.noise_on else np.zeros(2)
         self._constants = b.force_constants()
         self._lines = np.array([b.touchdown_clearance_m, -b.touchdown_clearance_m,
@@ -270,6 +333,7 @@ class ThrustSimulation:
         self._configure()
         if not setup.noise_on:
             self._sigma[:] = 0.0
+        self._bundle()
         return self
 
     def advance(self, n_steps: int) -> np.ndarray:
@@ -293,18 +357,14 @@ class ThrustSimulation:
         if s.sensor_noise_correlation_s > 0.0:
             noise[:, 0] = self._colour(noise[:, 0], np.exp(-b.sample_time_s / s.sensor_noise_correlation_s))
         trace = np.empty((n_steps, 1 + len(self.columns)))
-        G_A, G_B, G_C, G_D = self._current
 
         def part(first: int, last: int) -> tuple[int, int]:
-            return run(last - first, self.step + first, b.sample_time_s, self.plant, self._constants,
-                       self._plant[0], self._plant[1], s.nonlinear, s.gravity_n,
-                       self.coil, G_A, G_B, G_C, G_D, s.current_loop,
-                       kf._x, kf.P, kf.A, kf.B, kf.C, kf.Q, kf.R_diag,
-                       self.pid, self._gains, s.use_estimate, s.derivative_from_velocity,
-                       noise[first:last], self._sigma, b.touchdown_clearance_m, self.memory, trace[first:last])
+            return run(last - first, self.step + first, b.sample_time_s, self._collar, self._current_loop,
+                       self._kalman, self._pid, LiftoffNoise(draws=noise[first:last], sigma=self._sigma),
+                       trace[first:last])
 
         if n_steps == 1:                               # a single step (the inspector's) keeps the prior
-            prior = kf._x.copy(), kf.P.copy()
+            prior = kf.state.copy(), kf.P.copy()
             y = np.array([self.plant[0] + self._sigma[0] * noise[0, 0]])     # eq. 13: Z = x + V
             status, done = part(0, 1)
             self._last_correction = (*prior, y, trace[0, 0])

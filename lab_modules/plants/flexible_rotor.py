@@ -38,10 +38,15 @@ The paper gives no drawing with dimensions.  The geometry below is chosen
 * Bending modes carry 0.5 % modal damping (not in the paper; typical of a
   steel shaft with a shrink-fitted stack).
 
-The laminations add mass and diametral inertia but no bending stiffness
+The laminations add mass, diametral and polar inertia but no bending stiffness
 (thin insulated sheets); they are lumped onto the stack's end and centre nodes.
-Elements are Euler-Bernoulli beams with consistent mass matrices; the
-eigenproblem K phi = omega^2 M phi is solved by ``scipy.linalg.eigh``.
+Elements are Euler-Bernoulli beams with consistent mass matrices (the default,
+as in ``sensor_placement``) or Timoshenko beams (shear deformation and rotary
+inertia, Friswell et al., *Dynamics of Rotating Machines*, 2010, §5.4); the
+eigenproblem K phi = omega^2 M phi is solved by ``scipy.linalg.eigh``.  The
+polar-inertia matrix ``P`` (the gyroscopic matrix per unit speed, used by
+``plants.spinning_rotor``) holds the shaft's distributed and the stack's and
+hub's lumped polar inertia.
 """
 
 from __future__ import annotations
@@ -61,37 +66,60 @@ STEEL_DENSITY_KG_M3 = 7850.0
 LAMINATION_DENSITY_KG_M3 = 7650.0 * 0.95
 
 
-def beam_element(length_m: float, bending_stiffness_n_m2: float, mass_per_length_kg_m: float):
-    """Stiffness and consistent mass matrices of one Euler-Bernoulli element.
+def beam_element(length_m: float, bending_stiffness_n_m2: float, mass_per_length_kg_m: float,
+                 shear_ratio: float = 0.0):
+    """Stiffness and translational consistent mass matrices of one beam element.
 
     Degrees of freedom (w1, theta1, w2, theta2): displacement [m] and slope
-    [rad] at both ends, cubic Hermite shape functions.
+    [rad] at both ends.  ``shear_ratio`` phi = 12 EI / (kappa G A l^2) (Timoshenko,
+    Friswell et al. eq. 5.104-5.105); phi = 0 is the Euler-Bernoulli element with
+    cubic Hermite shape functions.
     """
-    l = length_m
-    K = bending_stiffness_n_m2 / l**3 * np.array([
+    l, phi = length_m, shear_ratio
+    K = bending_stiffness_n_m2 / ((1 + phi) * l**3) * np.array([
         [12, 6 * l, -12, 6 * l],
-        [6 * l, 4 * l * l, -6 * l, 2 * l * l],
+        [6 * l, (4 + phi) * l * l, -6 * l, (2 - phi) * l * l],
         [-12, -6 * l, 12, -6 * l],
-        [6 * l, 2 * l * l, -6 * l, 4 * l * l]])
-    M = mass_per_length_kg_m * l / 420 * np.array([
-        [156, 22 * l, 54, -13 * l],
-        [22 * l, 4 * l * l, 13 * l, -3 * l * l],
-        [54, 13 * l, 156, -22 * l],
-        [-13 * l, -3 * l * l, -22 * l, 4 * l * l]])
+        [6 * l, (2 - phi) * l * l, -6 * l, (4 + phi) * l * l]])
+    m1, m2, m3 = 312 + 588 * phi + 280 * phi**2, (44 + 77 * phi + 35 * phi**2) * l, 108 + 252 * phi + 140 * phi**2
+    m4, m5 = -(26 + 63 * phi + 35 * phi**2) * l, (8 + 14 * phi + 7 * phi**2) * l * l
+    m6 = -(6 + 14 * phi + 7 * phi**2) * l * l
+    M = mass_per_length_kg_m * l / (840 * (1 + phi) ** 2) * np.array([
+        [m1, m2, m3, m4],
+        [m2, m5, -m4, m6],
+        [m3, -m4, m1, -m2],
+        [m4, m6, -m2, m5]])
     return K, M
 
 
-def hermite_interpolate(node_z_m: np.ndarray, nodal: np.ndarray, z_m) -> np.ndarray:
+def rotary_element(length_m: float, section_inertia_kg_m: float, shear_ratio: float = 0.0) -> np.ndarray:
+    """Rotary-inertia matrix of one beam element (Friswell et al. eq. 5.106), rho I [kg m] the
+    diametral inertia per length; a circular section's polar inertia is twice it, so the
+    element's gyroscopic matrix per unit speed is twice this matrix (eq. 5.107)."""
+    l, phi = length_m, shear_ratio
+    m7, m8 = 36, (3 - 15 * phi) * l
+    m9, m10 = (4 + 5 * phi + 10 * phi**2) * l * l, (-1 - 5 * phi + 5 * phi**2) * l * l
+    return section_inertia_kg_m / (30 * (1 + phi) ** 2 * l) * np.array([
+        [m7, m8, -m7, m8],
+        [m8, m9, -m8, m10],
+        [-m7, -m8, m7, -m8],
+        [m8, m10, -m8, m9]])
+
+
+def hermite_interpolate(node_z_m: np.ndarray, nodal: np.ndarray, z_m, shear_ratio=0.0) -> np.ndarray:
     """Displacement at positions ``z_m`` from nodal (w, theta) rows (2 per node),
-    with the elements' own cubic shape functions.  ``nodal`` may have columns
-    (one per mode); the result has shape (len(z_m), columns)."""
+    with the elements' own shape functions (cubic Hermite; with a Timoshenko element's
+    ``shear_ratio`` phi, one per element or one for all, Friswell et al. eq. 5.102).
+    ``nodal`` may have columns (one per mode); the result has shape (len(z_m), columns)."""
     z = np.atleast_1d(np.asarray(z_m, dtype=float))
     nodal = nodal.reshape(2 * len(node_z_m), -1)
     e = np.clip(np.searchsorted(node_z_m, z, side="right") - 1, 0, len(node_z_m) - 2)
     l = node_z_m[e + 1] - node_z_m[e]
+    phi = np.broadcast_to(np.asarray(shear_ratio, dtype=float), (len(node_z_m) - 1,))[e]
     s = (z - node_z_m[e]) / l
-    h = np.stack([1 - 3 * s**2 + 2 * s**3, l * (s - 2 * s**2 + s**3),
-                  3 * s**2 - 2 * s**3, l * (-s**2 + s**3)], axis=1)
+    h = np.stack([1 - 3 * s**2 + 2 * s**3 + (1 - s) * phi, l * (s - 2 * s**2 + s**3 + (s - s**2) * phi / 2),
+                  3 * s**2 - 2 * s**3 + s * phi, l * (-s**2 + s**3 - (s - s**2) * phi / 2)], axis=1)
+    h /= (1 + phi)[:, None]
     rows = np.stack([2 * e, 2 * e + 1, 2 * e + 2, 2 * e + 3], axis=1)
     return np.einsum("pk,pkm->pm", h, nodal[rows])
 
@@ -123,6 +151,11 @@ class RotorGeometry:
         return self.stack_mass_kg * (self.stack_diameter_m**2 + self.shaft_diameter_m**2) / 16
 
     @property
+    def stack_polar_inertia_kg_m2(self) -> float:
+        """Polar moment of inertia of the stack (an annulus): m (D^2 + d^2) / 8."""
+        return self.stack_mass_kg * (self.stack_diameter_m**2 + self.shaft_diameter_m**2) / 8
+
+    @property
     def shaft_mass_kg(self) -> float:
         return STEEL_DENSITY_KG_M3 * np.pi / 4 * self.shaft_diameter_m**2 * self.length_m
 
@@ -135,16 +168,31 @@ class RotorGeometry:
         return self.bearing_m - self.stack_length_m / 2, self.bearing_m + self.stack_length_m / 2
 
 
-def assemble_beam(node_z_m: np.ndarray, bending_stiffness_n_m2: float, mass_per_length_kg_m: float):
-    """Global stiffness and consistent mass matrices of a uniform beam on the given nodes."""
+def assemble_beam(node_z_m: np.ndarray, bending_stiffness_n_m2: float, mass_per_length_kg_m: float,
+                  shear_ratio=0.0):
+    """Global stiffness and translational consistent mass matrices of a uniform beam on the
+    given nodes (``shear_ratio``: one phi per element or one for all, 0 = Euler-Bernoulli)."""
+    lengths = np.diff(node_z_m)
+    phi = np.broadcast_to(np.asarray(shear_ratio, dtype=float), lengths.shape)
     n_dof = 2 * len(node_z_m)
     K, M = np.zeros((n_dof, n_dof)), np.zeros((n_dof, n_dof))
-    for e, l in enumerate(np.diff(node_z_m)):
-        Ke, Me = beam_element(l, bending_stiffness_n_m2, mass_per_length_kg_m)
+    for e, l in enumerate(lengths):
+        Ke, Me = beam_element(l, bending_stiffness_n_m2, mass_per_length_kg_m, phi[e])
         dofs = slice(2 * e, 2 * e + 4)
         K[dofs, dofs] += Ke
         M[dofs, dofs] += Me
     return K, M
+
+
+def assemble_rotary(node_z_m: np.ndarray, section_inertia_kg_m: float, shear_ratio=0.0) -> np.ndarray:
+    """Global rotary-inertia matrix of a uniform beam (``rotary_element`` per element)."""
+    lengths = np.diff(node_z_m)
+    phi = np.broadcast_to(np.asarray(shear_ratio, dtype=float), lengths.shape)
+    n_dof = 2 * len(node_z_m)
+    R = np.zeros((n_dof, n_dof))
+    for e, l in enumerate(lengths):
+        R[2 * e:2 * e + 4, 2 * e:2 * e + 4] += rotary_element(l, section_inertia_kg_m, phi[e])
+    return R
 
 
 def solve_modes(K: np.ndarray, M: np.ndarray, constrained_dofs=()) -> tuple[np.ndarray, np.ndarray]:
@@ -157,35 +205,74 @@ def solve_modes(K: np.ndarray, M: np.ndarray, constrained_dofs=()) -> tuple[np.n
     return np.sqrt(np.maximum(omega_sq, 0.0)), shapes
 
 
+#: Element theories: Euler-Bernoulli (no shear, no rotary inertia in the mass matrix: ``sensor_placement``'s
+#: model) and Timoshenko (shear deformation and rotary inertia).  Both spin with the shaft's polar
+#: inertia in the gyroscopic matrix, as ROSS's shaft elements do.
+THEORIES = ("euler-bernoulli", "timoshenko")
+STEEL_POISSON = 0.3
+
+
+def cowper_shear_factor(poisson: float = STEEL_POISSON) -> float:
+    """Timoshenko shear coefficient kappa of a solid circular section (Cowper 1966):
+    kappa = 6 (1 + nu) / (7 + 6 nu)."""
+    return 6 * (1 + poisson) / (7 + 6 * poisson)
+
+
 class FlexibleRotor:
     """Finite-element model of the rotor on its pivot, and its modes.
 
     ``elements`` sets the mesh density (elements over the whole length); the
-    pivot, the stack's ends and centre and the disc are always nodes.
+    pivot, the stack's ends and centre and the disc are always nodes.  ``theory``
+    is one of ``THEORIES``.  Matrices per bending plane: ``K`` [N/m, N, N m],
+    ``M`` (translational and, for Timoshenko, rotary inertia) and ``P``, the polar
+    inertia [kg m^2 on slopes] whose product with the speed is the gyroscopic
+    matrix (``plants.spinning_rotor``).
     """
 
-    def __init__(self, geometry: RotorGeometry = RotorGeometry(), elements: int = 60):
+    def __init__(self, geometry: RotorGeometry = RotorGeometry(), elements: int = 60,
+                 theory: str = "euler-bernoulli"):
+        if theory not in THEORIES:
+            raise ValueError(f"unknown beam theory {theory!r}: expected one of {', '.join(THEORIES)}")
         self.geometry = g = geometry
-        key_points = [0.0, g.length_m, g.pivot_m, *g.stack_ends_m, g.bearing_m, g.hub_position_m]
-        z = np.concatenate([np.linspace(0.0, g.length_m, elements + 1), key_points])
-        self.node_z_m = np.unique(np.round(z, 9))
-        self.K, self.M = assemble_beam(self.node_z_m, STEEL_YOUNGS_PA * np.pi * g.shaft_diameter_m**4 / 64,
-                                       STEEL_DENSITY_KG_M3 * np.pi / 4 * g.shaft_diameter_m**2)
+        self.theory = theory
+        key_points = np.array([0.0, g.length_m, g.pivot_m, *g.stack_ends_m, g.bearing_m, g.hub_position_m])
+        grid = np.linspace(0.0, g.length_m, elements + 1)
+        # a grid node closer than a quarter element to a key point would leave a sliver of an element
+        # (ill-conditioned mass matrix); the key point takes its place
+        near = np.min(np.abs(grid[:, None] - key_points[None, :]), axis=1) < 0.25 * g.length_m / elements
+        self.node_z_m = np.unique(np.round(np.concatenate([grid[~near], key_points]), 9))
+        area_m2 = np.pi / 4 * g.shaft_diameter_m**2
+        second_moment_m4 = np.pi * g.shaft_diameter_m**4 / 64
+        bending_stiffness_n_m2 = STEEL_YOUNGS_PA * second_moment_m4
+        shear_modulus_pa = STEEL_YOUNGS_PA / (2 * (1 + STEEL_POISSON))
+        # phi = 12 EI / (kappa G A l^2) per element (Friswell et al. eq. 5.103); 0 for Euler-Bernoulli
+        self.shear_ratio = (12 * bending_stiffness_n_m2 / (cowper_shear_factor() * shear_modulus_pa * area_m2
+                                                           * np.diff(self.node_z_m) ** 2)
+                            if theory == "timoshenko" else np.zeros(len(self.node_z_m) - 1))
+        self.K, self.M = assemble_beam(self.node_z_m, bending_stiffness_n_m2, STEEL_DENSITY_KG_M3 * area_m2,
+                                       self.shear_ratio)
+        rotary = assemble_rotary(self.node_z_m, STEEL_DENSITY_KG_M3 * second_moment_m4, self.shear_ratio)
+        if theory == "timoshenko":
+            self.M += rotary
+        self.P = 2 * rotary                  # a circular section's polar inertia is twice its diametral one
         # the stack as a rigid body on its end and centre nodes with Simpson's weights 1/6, 2/3, 1/6:
         # they reproduce its mass and its length's share of inertia (m L^2 / 12) on any mesh
         low, high = g.stack_ends_m
         for z, share in ((low, 1 / 6), (g.bearing_m, 2 / 3), (high, 1 / 6)):
             self.add_lumped(self.node(z), share * g.stack_mass_kg, 0.0)
-        self.add_lumped(self.node(g.bearing_m), 0.0, g.stack_inertia_kg_m2)
-        self.add_lumped(self.node(g.hub_position_m), g.hub_mass_kg, g.hub_mass_kg * g.hub_diameter_m**2 / 16)
+        self.add_lumped(self.node(g.bearing_m), 0.0, g.stack_inertia_kg_m2, g.stack_polar_inertia_kg_m2)
+        self.add_lumped(self.node(g.hub_position_m), g.hub_mass_kg, g.hub_mass_kg * g.hub_diameter_m**2 / 16,
+                        g.hub_mass_kg * g.hub_diameter_m**2 / 8)
         self.constrained_dofs = (2 * self.node(g.pivot_m),)
 
     def node(self, z_m: float) -> int:
         return int(np.argmin(np.abs(self.node_z_m - z_m)))
 
-    def add_lumped(self, node: int, mass_kg: float, inertia_kg_m2: float) -> None:
+    def add_lumped(self, node: int, mass_kg: float, inertia_kg_m2: float, polar_inertia_kg_m2: float = 0.0) -> None:
+        """A rigid body at a node: mass [kg], diametral and polar moments of inertia [kg m^2]."""
         self.M[2 * node, 2 * node] += mass_kg
         self.M[2 * node + 1, 2 * node + 1] += inertia_kg_m2
+        self.P[2 * node + 1, 2 * node + 1] += polar_inertia_kg_m2
 
     @property
     def total_mass_kg(self) -> float:
@@ -195,6 +282,10 @@ class FlexibleRotor:
     @cached_property
     def _modes(self) -> tuple[np.ndarray, np.ndarray]:
         omega, shapes = solve_modes(self.K, self.M, self.constrained_dofs)
+        # mode 1 is the rigid tilting about the pivot, w = z - z_pivot, theta = 1, which K annihilates
+        # exactly; eigh returns it with a round-off frequency of ~eps times the mesh's highest one
+        tilting = np.column_stack([self.node_z_m - self.geometry.pivot_m, np.ones(len(self.node_z_m))]).ravel()
+        omega[0], shapes[:, 0] = 0.0, tilting / np.sqrt(tilting @ self.M @ tilting)
         # sign convention: every mode moves positively at the free end
         return omega, shapes * np.where(shapes[-2] < 0, -1.0, 1.0)
 
@@ -207,7 +298,7 @@ class FlexibleRotor:
 
     def displacement(self, z_m, n_modes: int) -> np.ndarray:
         """Modal displacements phi_i(z) [m per unit modal coordinate], shape (len(z), n_modes)."""
-        return hermite_interpolate(self.node_z_m, self.mode_shapes(n_modes), z_m)
+        return hermite_interpolate(self.node_z_m, self.mode_shapes(n_modes), z_m, self.shear_ratio)
 
     def nodal_points_m(self, mode: int) -> np.ndarray:
         """Axial positions [m] where mode ``mode`` (0-based) crosses zero (pivot excluded)."""

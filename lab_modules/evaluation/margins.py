@@ -1,4 +1,5 @@
-"""Margins and sensitivity in the Analysis tab, as AMB engineers grade a loop.
+"""Margins and sensitivity of an exercise's loops, as AMB engineers grade a loop; the
+Analysis tab shows the readouts and draws the plots.
 
 For every loop an exercise opens at the plant input (``Exercise.open_loops``):
 the open-loop Bode plot (|L| and arg L), the sensitivity |S| = 1 / |1 + L|
@@ -9,6 +10,8 @@ is stable only between two gains), phase margin, |S|max and its zone.
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 
@@ -22,11 +25,19 @@ ZONE_COLORS = ("#2ca02c", "#ff7f0e", "#d62728")     # the A/B, B/C and C/D limit
 MARGIN_GRID_POINTS = 3000
 
 
-def margin_view(exercise: Exercise, values: dict) -> tuple[list, list[Plot], list[str]]:
+class MarginView(NamedTuple):
+    """What the margins of an exercise's open loops add to its analysis."""
+
+    readouts: list[tuple[str, float, str]]            # (label, value, unit), as ``Analysis.readouts``
+    plots: list[Plot]                                 # |L|, arg L and |S| [dB] with the ISO zone limits
+    notes: list[str]                                  # what the student reads below the readouts
+
+
+def margin_view(exercise: Exercise, values: dict) -> MarginView:
     """Readouts, plots and notes of the exercise's open loops (empty if it has none)."""
     loops = exercise.open_loops(values)
     if not loops:
-        return [], [], ([exercise.no_feedback_loop] if exercise.no_feedback_loop else [])
+        return MarginView([], [], [exercise.no_feedback_loop] if exercise.no_feedback_loop else [])
     found = {name: analysis.loop_margins(loop, analysis.frequency_grid(loop, points=MARGIN_GRID_POINTS))
              for name, loop in loops.items()}
     # the plots' grid, plus each loop's |S| peak and crossover: a narrow resonance peak is drawn at its height
@@ -57,7 +68,7 @@ def margin_view(exercise: Exercise, values: dict) -> tuple[list, list[Plot], lis
              "frequency [Hz]", "|S| [dB]", f_hz,
              tuple(sens) + limits, log_x=True),
     ]
-    return readouts, plots, notes
+    return MarginView(readouts, plots, notes)
 
 
 def _decibels(factor: float) -> float:
@@ -87,7 +98,7 @@ def _margin_readouts(name: str, m: analysis.Margins) -> list[tuple[str, float, s
     return rows
 
 
-def with_margins(result: Analysis, margins: tuple[list, list, list]) -> Analysis:
+def with_margins(result: Analysis, margins: MarginView) -> Analysis:
     """The analysis with the margin readouts, plots and notes appended."""
     readouts, plots, notes = margins
     return Analysis(result.readouts + readouts, result.poles, result.notes + notes, result.plots + plots)
