@@ -3,6 +3,8 @@ browser's side is in tests/test_browser_student_view.py)."""
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 from markdown_it import MarkdownIt
@@ -44,20 +46,46 @@ def test_a_long_list_is_grouped_by_subject_and_folded_the_scope_window_open():
     assert "<details" not in short and short.count("| quantity | value | unit |") == 1
 
 
+@functools.cache
+def shown_rows(name: str) -> tuple:
+    """The readouts a tab of exercise ``name`` shows at its defaults: its analysis's (every step)
+    and its scope window's after 2 s of simulated time."""
+    exercise = get(name)
+    values = exercise.resolve()
+    result = exercise.analyse(values)
+    rows = [row for analysis in ([result] if hasattr(result, "readouts") else list(result))
+            for row in analysis.readouts]
+    simulation = exercise.simulation(values)
+    trace = np.vstack([simulation.advance(max(1, round(0.05 / simulation.sample_time_s))) for _ in range(40)])
+    window = {column: trace[:, 1 + i] for i, column in enumerate(simulation.columns)}
+    return tuple(rows + readout_rows(None, exercise, window))
+
+
 @pytest.mark.parametrize("name", list(registry()))
 def test_every_key_readout_exists(name):
     """Each exercise's pinned readouts are among what its analysis and its scope window show."""
     exercise = get(name)
-    values = exercise.resolve()
-    result = exercise.analyse(values)
-    labels = {label for analysis in ([result] if hasattr(result, "readouts") else list(result))
-              for label, _, _ in analysis.readouts}
-    simulation = exercise.simulation(values)
-    trace = np.vstack([simulation.advance(max(1, round(0.05 / simulation.sample_time_s))) for _ in range(40)])
-    window = {column: trace[:, 1 + i] for i, column in enumerate(simulation.columns)}
-    labels |= {label for label, _, _ in readout_rows(None, exercise, window)}
+    labels = {label for label, _, _ in shown_rows(name)}
     missing = [key for key in exercise.key_readouts if key not in labels and key + readouts.LIVE_SUFFIX not in labels]
     assert exercise.key_readouts and not missing, missing
+
+
+@pytest.mark.parametrize("name", list(registry()))
+def test_every_list_under_the_charts_shows_at_most_a_short_table_unfolded(name):
+    """A long list is grouped so that what is not folded away is no longer than a short list (the
+    last analysis step's rows, as the tab shows them, with the scope window's)."""
+    exercise = get(name)
+    result = exercise.analyse(exercise.resolve())
+    last = result if hasattr(result, "readouts") else list(result)[-1]
+    live = [row for row in shown_rows(name) if row[0].endswith(readouts.LIVE_SUFFIX)]
+    loose, groups = readouts.sections(list(last.readouts) + live)
+    assert len(loose) <= readouts.LONG_LIST_ROWS, [label for label, _, _ in loose]
+    assert all(len(members) >= 2 for members in groups.values())
+
+
+def test_numbers_written_as_text_keep_their_unit_a_word_does_not():
+    assert readouts.row_markdown("Critical speeds", "9153, 11020", "rpm") == "| Critical speeds | 9153, 11020 | rpm |"
+    assert readouts.row_markdown("Critical speeds", "none", "rpm") == "| Critical speeds | none |  |"
 
 
 # -- ekf_parameters: the convergence time, the k_i axis ------------------------------------------------

@@ -15,9 +15,15 @@ HEADER = ("| quantity | value | unit |", "|---|---:|---|")
 LIVE_GROUP = "This run (scope window)"
 
 
+def is_word(value) -> bool:
+    """Whether a readout's value is a word ("touched down", "yes"), not numbers written as text
+    ("9153, 11020" critical speeds, which keep their unit)."""
+    return isinstance(value, str) and not any(character.isdigit() for character in value)
+
+
 def row_markdown(label: str, value, unit: str) -> str:
     """One table row; a word in place of a number ("touched down") carries no unit."""
-    return f"| {cell(label)} | {readout(value)} | {'' if isinstance(value, str) else cell(unit)} |"
+    return f"| {cell(label)} | {readout(value)} | {'' if is_word(value) else cell(unit)} |"
 
 
 def key_rows(rows, keys: tuple[str, ...]) -> list:
@@ -46,26 +52,28 @@ def table(rows) -> str:
     return "\n".join([*HEADER, *(row_markdown(*row) for row in rows)])
 
 
+def sections(rows) -> tuple[list, dict[str, list]]:
+    """The list under the charts as it is shown: the rows in view (all of a short list; in a long
+    one those about no group), and the groups of two or more rows, by name, in their order."""
+    if len(rows) <= LONG_LIST_ROWS:
+        return list(rows), {}
+    groups: dict[str | None, list] = {}
+    for row in rows:
+        groups.setdefault(group_of(row[0]), []).append(row)
+    grouped = {name: members for name, members in groups.items() if name is not None and len(members) >= 2}
+    return [row for row in rows if group_of(row[0]) not in grouped], grouped
+
+
 def grouped_markdown(rows, notes=()) -> str:
     """Every readout under the charts, then the notes in italics: one table, or for a long list the
     rows about no group first, then a folded section per group of two or more rows (the scope
     window's open: it follows the run)."""
-    parts = []
-    if len(rows) <= LONG_LIST_ROWS:
-        parts.append(table(rows))
-    else:
-        groups: dict[str | None, list] = {}
-        for row in rows:
-            groups.setdefault(group_of(row[0]), []).append(row)
-        grouped = {name for name, members in groups.items() if name is not None and len(members) >= 2}
-        loose = [row for row in rows if group_of(row[0]) not in grouped]
-        if loose:
-            parts.append(table(loose))
-        for name, members in groups.items():
-            if name in grouped:
-                opened = " open" if name == LIVE_GROUP else ""
-                parts.append(f"<details{opened}><summary><b>{html.escape(name)}</b> ({len(members)} readouts)"
-                             "</summary>\n\n"
-                             f"{table(members)}\n\n</details>")
+    loose, groups = sections(rows)
+    parts = [table(loose)] if loose else []
+    for name, members in groups.items():
+        opened = " open" if name == LIVE_GROUP else ""
+        parts.append(f"<details{opened}><summary><b>{html.escape(name)}</b> ({len(members)} readouts)"
+                     "</summary>\n\n"
+                     f"{table(members)}\n\n</details>")
     parts += [f"*{note}*" for note in notes]
     return '<div class="lab-readouts">\n\n' + "\n\n".join(parts) + "\n\n</div>"

@@ -334,7 +334,7 @@ class RotorAtSpeed(Exercise):
     default_duration_s = 0.3
     claims = CLAIMS
     key_readouts = ("Critical speeds (forward whirl = 1×)", "Closed loop stable at this speed",
-                    "Peak unbalance orbit at the bearing, 0-12,000 rpm", "Largest orbit radius at the bearing",
+                    "Unbalance: peak orbit at the bearing, 0-12,000 rpm", "Largest orbit radius at the bearing",
                     "Speed now")
     charts = (
         Chart("Rotor position", "µm", (
@@ -398,27 +398,27 @@ class RotorAtSpeed(Exercise):
                     ("Closed loop stable at this speed", "yes" if at_speed.stable[0] else "no", "")]
         for j in range(min(n, 4)):
             for d, direction in ((0, "backward"), (1, "forward")):
-                readouts.append((f"Mode {j + 1} {direction}: frequency, damping",
+                readouts.append((f"Closed loop at this speed: mode {j + 1} {direction}, frequency and damping",
                                  f"{at_speed.whirl_hz[0, j, d]:.1f} Hz, {100 * at_speed.damping[0, j, d]:.2f} %", ""))
         for j in range(1, min(n, 4)):
-            readouts.append((f"Rotor on its ball bearing, mode {j + 1}: backward / forward",
+            readouts.append((f"Rotor on its ball bearing: mode {j + 1}, backward / forward",
                              f"{-free[here, j, 0]:.1f} / {free[here, j, 1]:.1f} Hz at {CAMPBELL_SPEEDS_RPM[here]:.0f} rpm",
                              ""))
         readouts += [
             ("Critical speeds (forward whirl = 1×)", ", ".join(f"{c:.0f}" for c in criticals) or "none below 12,000",
              "rpm"),
-            (f"Unbalance U ({values['balance_grade']})", unbalance_kg_m(values) * 1e6, "g·mm"),
-            ("Unbalance force at this speed", unbalance_kg_m(values) * float(np.pi * speed / 30) ** 2, "N"),
-            ("Unbalance orbit at the bearing, this speed", bearing_here * 1e6, "µm"),
-            ("Unbalance orbit at the sensor, this speed",
+            (f"Unbalance: U ({values['balance_grade']})", unbalance_kg_m(values) * 1e6, "g·mm"),
+            ("Unbalance: force at this speed", unbalance_kg_m(values) * float(np.pi * speed / 30) ** 2, "N"),
+            ("Unbalance: orbit at the bearing, this speed", bearing_here * 1e6, "µm"),
+            ("Unbalance: orbit at the sensor, this speed",
              abs(response_here[LOOP_OUTPUTS.index("r_sensor_m")]) * 1e6, "µm"),
-            ("Unbalance control current amplitude, this speed",
+            ("Unbalance: control current amplitude, this speed",
              abs(response_here[LOOP_OUTPUTS.index("current_a")]), "A"),
-            ("ISO 14839-2 zone at this speed", iso_14839_2_zone(bearing_here, clearance), ""),
+            ("Unbalance: ISO 14839-2 zone at this speed", iso_14839_2_zone(bearing_here, clearance), ""),
         ]
         peak = int(np.argmax(np.abs(response[:, LOOP_OUTPUTS.index("r_bearing_m")])))
         peak_m = abs(response[peak, LOOP_OUTPUTS.index("r_bearing_m")])
-        readouts += [("Peak unbalance orbit at the bearing, 0-12,000 rpm",
+        readouts += [("Unbalance: peak orbit at the bearing, 0-12,000 rpm",
                       (f"{peak_m * 1e6:.1f} µm at {CAMPBELL_SPEEDS_RPM[peak]:.0f} rpm "
                        f"(zone {iso_14839_2_zone(peak_m, clearance)})"), "")]
         notes = [(f"Sensor: {sensor_name(offset)} at {offset:+.0f} mm from the bearing plane; feedback: "
@@ -433,7 +433,7 @@ class RotorAtSpeed(Exercise):
         poles = {"open-loop plant": np.linalg.eigvals(plant_and_grid(values)[0].A(float(np.pi * speed / 30))),
                  "closed loop": at_speed_poles(values)}
         midspan = midspan_orbit_m(values, closed)
-        readouts.append((f"Peak unbalance orbit at mid-span (z = {MIDSPAN_M * 1e3:.0f} mm)",
+        readouts.append((f"Unbalance: peak orbit at mid-span (z = {MIDSPAN_M * 1e3:.0f} mm)",
                          f"{np.max(midspan) * 1e6:.1f} µm at {CAMPBELL_SPEEDS_RPM[np.argmax(midspan)]:.0f} rpm", ""))
         plots = [campbell_plot(values, free, swept, criticals)]
         yield Analysis(readouts + [("Stability limits against speed", "computing …", "")], poles, notes,
