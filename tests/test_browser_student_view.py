@@ -86,6 +86,23 @@ def test_every_screen_keeps_controls_and_tabs_clear(open_tab):
     assert not tab.errors, tab.errors
 
 
+def test_key_readouts_are_in_view_above_live_plots_and_in_the_rotor_at_speed(open_tab):
+    """At 1366 x 768 the key readouts sit above the live plots (self_sensing's ripple zoom pushed
+    them below the fold) and rotor_at_speed's are in view; its long list is folded into groups."""
+    tab = _slow_tab(open_tab)
+    page = tab.page
+    page.get_by_role("heading").first.wait_for(timeout=60000)
+    for name in ("self_sensing", "rotor_at_speed"):
+        exercise = get(name)
+        tab.switch_exercise(exercise.title, timeout_ms=90000)
+        page.get_by_text(exercise.key_readouts[0]).first.wait_for(timeout=90000)
+        for label in exercise.key_readouts:
+            _wait(lambda label=label: _in_view(page, label), 60, f"{name}: {label} in view")
+    for group in ("Closed loop at this speed", "Unbalance"):
+        summary = page.locator("summary", has_text=group).first
+        assert summary.is_visible() and summary.evaluate("s => !s.parentElement.open"), group
+
+
 def test_upload_says_what_happened_under_the_button(open_tab, tmp_path):
     """A refused CSV (semicolons) and a loaded one: the line under "Load recording" says so, in view."""
     tab = _slow_tab(open_tab)

@@ -272,8 +272,8 @@ class LabSession:
         self.docks.dock(gui)
         tabs = self.docks.tabs
         with tabs["Scope"]:
+            self.analysis.add_pinned(gui)              # first: in view at 1366 x 768 above any live plot
             live = LivePlots(gui, exercise, self.state.simulation)   # if the exercise has any
-            self.analysis.add_pinned(gui)
             time_axis = gui.add_dropdown("Time axis", TIME_AXES, initial_value=self.time_axis,
                                          hint="Time before the newest sample (rolling), or the time since "
                                               "Reset, one window after the other (to read when something "
