@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from lab_modules.exercises import get
+from lab_modules.exercises import get, registry
 from lab_modules.exercises.ekf_parameters import CONVERGENCE_LABEL
 from lab_modules.exercises.lqg_vs_pid import NO_OVERSHOOT
 from lab_modules.exercises.maglev_tuning import SHIPPED_RECORDING
@@ -101,6 +101,26 @@ def test_key_readouts_are_in_view_above_live_plots_and_in_the_rotor_at_speed(ope
     for group in ("Closed loop at this speed", "Unbalance"):
         summary = page.locator("summary", has_text=group).first
         assert summary.is_visible() and summary.evaluate("s => !s.parentElement.open"), group
+
+
+def test_the_exercise_chooser_shows_every_title_whole_on_a_small_screen(open_tab):
+    """1024 x 768: the chooser's list names every exercise by its whole title on one line (none cut
+    off, none wrapped into a second line that reads as another entry)."""
+    tab = _slow_tab(open_tab)
+    page = tab.page
+    page.set_viewport_size({"width": 1024, "height": 768})
+    page.get_by_role("heading").first.wait_for(timeout=60000)
+    page.get_by_label("Exercise", exact=True).first.click()
+    options = page.get_by_role("option")
+    options.first.wait_for()
+    shown = options.evaluate_all("""os => os.map(o => ({text: o.innerText.trim(),
+        whole: o.scrollWidth <= o.clientWidth + 1, right: o.getBoundingClientRect().right,
+        height: o.getBoundingClientRect().height}))""")
+    assert sorted(option["text"] for option in shown) == sorted(exercise.title for exercise in registry().values())
+    assert all(option["whole"] and option["right"] <= 1024 for option in shown), shown
+    heights = [option["height"] for option in shown]
+    assert max(heights) < 1.5 * min(heights), shown                # one line each
+    page.keyboard.press("Escape")
 
 
 def test_upload_says_what_happened_under_the_button(open_tab, tmp_path):
