@@ -1,12 +1,13 @@
 """Command line of the lab.
 
-    python -m app [--host H] [--port P] [--exercise NAME] [--data-dir DIR] [--token T]
-                  [--allow-origin URL ...]     start the browser lab (default; also ``serve``)
+    python -m app [--host H] [--port P] [--exercise NAME] [--data-dir DIR] [--token T | --token-file F]
+                  [--max-tabs N] [--allow-origin URL ...] [--trusted-proxy A ...]
+                                               start the browser lab (default; also ``serve``)
     python -m app serve --workers N [same options] [--worker-ports FIRST]   N lab processes behind HAProxy
     python -m app haproxy-config --backend HOST:PORT ...    HAProxy configuration for several machines
     python -m app list [--json]                exercises and their parameters
     python -m app run NAME [--set N=V ...] [--duration S] [--seed N] [--data FILE] [--json]
-    python -m app run --code KN-7Q3M [--set N=V ...] [--json]   a saved experiment, headless
+    python -m app run --code KN-7Q3M-X9TA-HPRW [--set N=V ...] [--json]   a saved experiment, headless
     python -m app save NAME [--set N=V ...] [--data FILE]        save an experiment, print its code
     python -m app bench [--json] [--browser]   throughput benchmark; --browser: slider-to-readout latency
     python -m app reproduce [--json] [--quick] [--html DIR] [--exercise NAME ...]
@@ -46,7 +47,17 @@ def _serve_options(parser: argparse.ArgumentParser, defaults: bool) -> None:
     parser.add_argument("--data-dir", default=default(None), metavar="DIR",
                         help="where saved experiments live (default ~/.local/share/amb-lab)")
     parser.add_argument("--token", default=default(None),
-                        help="class token asked of every new tab when not on loopback (default: generated)")
+                        help="class token asked of every new tab when not on loopback (default: generated; "
+                             "the process list shows it to every user: prefer --token-file or "
+                             f"${access.TOKEN_VARIABLE})")
+    parser.add_argument("--token-file", default=default(None), metavar="FILE",
+                        help="read the class token from the first line of FILE")
+    parser.add_argument("--trusted-proxy", action="append", default=default([]), metavar="ADDRESS",
+                        help="a proxy whose X-Forwarded-For names the student's address (repeatable; "
+                             "loopback is always trusted), e.g. the balancer in front of several machines")
+    parser.add_argument("--max-tabs", default=default(str(access.TABS_PER_PROCESS)), metavar="N",
+                        help=f"tabs one lab process gives a lab (default {access.TABS_PER_PROCESS}, what one core "
+                             "streams at full rate); further tabs wait at a 'the lab is full' note")
     parser.add_argument("--allow-origin", action="append", default=default([]), metavar="URL",
                         help="a web origin besides the lab's own address that may open tabs (repeatable), "
                              "e.g. https://lab.example.org behind a proxy")
@@ -75,7 +86,7 @@ def _parser() -> argparse.ArgumentParser:
     listing.add_argument("--json", action="store_true", help="print JSON")
     run = sub.add_parser("run", help="run one exercise headless and print its metrics")
     run.add_argument("exercise", nargs="?", help="exercise name (or --code)")
-    run.add_argument("--code", default=None, help="run a saved experiment (e.g. KN-7Q3M)")
+    run.add_argument("--code", default=None, help="run a saved experiment (e.g. KN-7Q3M-X9TA-HPRW)")
     run.add_argument("--data-dir", default=None, metavar="DIR", help="where saved experiments live")
     run.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                      help="override a parameter (repeatable)")
@@ -92,7 +103,7 @@ def _parser() -> argparse.ArgumentParser:
     save.add_argument("--data-dir", default=None, metavar="DIR", help="where saved experiments live")
     bench = sub.add_parser("bench", help="closed-loop throughput benchmark")
     bench.add_argument("--json", action="store_true", help="print JSON")
-    bench.add_argument("--seconds", type=float, default=2.0, help="simulated seconds per measurement")
+    bench.add_argument("--seconds", default="2.0", help="simulated seconds per measurement (0.1 ... 60)")
     bench.add_argument("--browser", action="store_true",
                        help="instead: slider-to-readout latency in headless Chromium (needs the test extras)")
     reproduce = sub.add_parser(
@@ -148,8 +159,9 @@ def main(argv: list[str] | None = None) -> int:
             from app.hall import check_port, haproxy_config, parse_backend
             backends = [parse_backend(b) for b in args.backend]
             print(haproxy_config(args.bind_host, check_port(args.bind_port), backends,
-                                 note="\n# Start the lab on every backend with the same --token; "
-                                      "run: haproxy -f THIS_FILE"), end="")
+                                 note="\n# Start the lab on every backend with the same token (--token-file), "
+                                      "--allow-origin http://THIS_BALANCER and --trusted-proxy THIS_BALANCER;"
+                                      "\n# run: haproxy -f THIS_FILE"), end="")
             return 0
         if args.command == "bench" and args.clients is not None:
             from app.commands.load_bench import main as load_bench_main
@@ -158,7 +170,7 @@ def main(argv: list[str] | None = None) -> int:
                                    args.slider_every)
         if args.command == "bench":
             from app.commands.bench import main as bench_main
-            return bench_main(args.seconds, args.json)
+            return bench_main(headless.bench_seconds(args.seconds), args.json)
     except ParameterError as error:
         print(f"error: {error}", file=sys.stderr)
         return USAGE_ERROR

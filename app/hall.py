@@ -34,6 +34,7 @@ import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
 
+from app.infra.access import TOKEN_VARIABLE, check_bindable, is_address
 from lab_modules.parameters import ParameterError
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -47,12 +48,21 @@ POLL_S = 0.5
 RESTART_DELAYS_S = (1.0, 2.0, 5.0, 10.0, 30.0)   # after quick successive crashes
 STABLE_AFTER_S = 30.0                 # a worker that ran this long restarts without delay
 STOP_TIMEOUT_S = 10.0
+PAGE_LOADS = 4                        # connections a process takes beyond its tabs: page loads, a "full" note
+QUEUE_TIMEOUT_S = 5
+#: What HAProxy answers when every process is at its cap (or none is up): one line, no quotes.
+FULL_PAGE = ("<!doctype html><title>AMB estimation lab</title><h2>The lab is full</h2><p>Every place on the "
+             "lab server is taken (or it is restarting). Try again in a minute, or ask your instructor.</p>")
 
 
 def haproxy_config(bind_host: str, bind_port: int, backends: list[tuple[str, int]],
-                   health_path: str = HEALTH_PATH, health_status: int = HEALTH_STATUS, note: str = "") -> str:
-    """An HAProxy configuration balancing lab tabs over ``backends`` (host, port)."""
-    servers = "\n".join(f"    server lab{k + 1} {host}:{port}" for k, (host, port) in enumerate(backends))
+                   health_path: str = HEALTH_PATH, health_status: int = HEALTH_STATUS, note: str = "",
+                   max_tabs: int | None = None) -> str:
+    """An HAProxy configuration balancing lab tabs over ``backends`` (host, port); ``max_tabs``:
+    each backend's ``--max-tabs``, capping its connections (tabs plus a few page loads) so that
+    a full class spreads and the last students get the "lab is full" page."""
+    cap = f" maxconn {max_tabs + PAGE_LOADS}" if max_tabs is not None else ""
+    servers = "\n".join(f"    server lab{k + 1} {host}:{port}{cap}" for k, (host, port) in enumerate(backends))
     bind = f"[{bind_host}]" if ":" in bind_host else bind_host
     return f"""# AMB estimation lab: HAProxy in front of {len(backends)} lab process(es).{note}
 global
@@ -68,9 +78,12 @@ defaults
     timeout http-request 10s
     timeout tunnel 4h                    # a tab is one websocket for the whole lesson
     timeout client-fin 5s
+    timeout queue {QUEUE_TIMEOUT_S}s                      # every process at its maxconn: the page below, not a long wait
+    http-error status 503 content-type "text/html; charset=utf-8" string "{FULL_PAGE}"
 
 frontend lab
     bind {bind}:{bind_port}
+    option forwardfor                    # the lab throttles wrong class tokens per client address
     default_backend labs
 
 backend labs
@@ -136,13 +149,16 @@ class Worker:
     index: int
     port: int
     command: list[str]
+    environment: dict[str, str]
     process: subprocess.Popen | None = None
     started: float = 0.0
     crashes: int = 0                   # quick successive exits, for the restart delay
     restart_at: float | None = None
+    exited_at: float | None = None     # set from an exit until the restarted process answers
+    start_s: float | None = None       # how long its last start took until it answered [s]
 
     def start(self) -> None:
-        self.process = subprocess.Popen(self.command, cwd=ROOT, stdin=subprocess.DEVNULL,
+        self.process = subprocess.Popen(self.command, cwd=ROOT, env=self.environment, stdin=subprocess.DEVNULL,
                                         stdout=subprocess.DEVNULL, start_new_session=True,
                                         preexec_fn=_die_with_parent)  # noqa: PLW1509 (no threads here)
         self.started, self.restart_at = time.monotonic(), None
@@ -153,18 +169,28 @@ class Worker:
 
 
 def worker_command(port: int, settings, allow_origins: list[str]) -> list[str]:
-    """A worker: the single-process lab on a loopback port with the hall's settings.  The class
-    token is passed on explicitly: a worker on loopback would otherwise ask none, and every tab
-    reaches it through HAProxy from the network."""
+    """A worker: the single-process lab on a loopback port with the hall's settings (the class
+    token goes in its environment: ``worker_environment``)."""
     command = [sys.executable, "-m", "app", "--host", "127.0.0.1", "--port", str(port),
-               "--exercise", settings.exercise]
-    if settings.token is not None:
-        command += ["--token", settings.token]
+               "--exercise", settings.exercise, "--max-tabs", str(settings.max_tabs)]
+    for proxy in settings.trusted_proxies:
+        command += ["--trusted-proxy", proxy]
     if settings.data_dir is not None:                 # one saved-experiments database for all workers
         command += ["--data-dir", str(settings.data_dir)]
-    for origin in allow_origins:
+    served = [] if is_address(settings.host) else [f"http://{settings.host}:{settings.port}"]   # the hall's name
+    for origin in [*allow_origins, *served]:
         command += ["--allow-origin", origin]
     return command
+
+
+def worker_environment(settings) -> dict[str, str]:
+    """The workers' environment: the class token is passed on (a worker on loopback would otherwise
+    ask none, and every tab reaches it through HAProxy from the network), in the environment, which
+    only the instructor's user can read, not on the command line, which the process list shows to all."""
+    environment = {name: value for name, value in os.environ.items() if name != TOKEN_VARIABLE}
+    if settings.token is not None:
+        environment[TOKEN_VARIABLE] = settings.token
+    return environment
 
 
 def _ready(url: str) -> bool:
@@ -202,7 +228,6 @@ def _raise_stop(signum, _frame) -> None:
 def serve_hall(settings, workers: int, first_worker_port: int | None, allow_origins: list[str]) -> int:
     """Serve the lab (``settings``: ``app.server.Settings``) with ``workers`` processes behind
     HAProxy until Ctrl-C or SIGTERM."""
-    from app.infra.access import check_bindable
     from app.infra.store import Store, StoreError
     from app.server import shown_url
     haproxy = shutil.which("haproxy")
@@ -226,12 +251,13 @@ def serve_hall(settings, workers: int, first_worker_port: int | None, allow_orig
         Store(settings.data_dir).close()      # create the shared database once, before the workers race
     except StoreError as error:
         raise ParameterError(str(error)) from None
-    pool = [Worker(k + 1, p, worker_command(p, settings, allow_origins)) for k, p in enumerate(ports)]
+    pool = [Worker(k + 1, p, worker_command(p, settings, allow_origins), worker_environment(settings))
+            for k, p in enumerate(ports)]
     previous = {s: signal.signal(s, _raise_stop) for s in (signal.SIGINT, signal.SIGTERM)}
     proxy: subprocess.Popen | None = None
     with tempfile.TemporaryDirectory(prefix="amb-lab-hall-") as scratch:
         config = Path(scratch) / "haproxy.cfg"
-        config.write_text(haproxy_config(host, port, [("127.0.0.1", p) for p in ports]))
+        config.write_text(haproxy_config(host, port, [("127.0.0.1", p) for p in ports], max_tabs=settings.max_tabs))
         try:
             for worker in pool:
                 worker.start()
@@ -243,6 +269,7 @@ def serve_hall(settings, workers: int, first_worker_port: int | None, allow_orig
                               file=sys.stderr)
                         return 1
                     time.sleep(0.3)
+                worker.start_s = time.monotonic() - worker.started
             proxy = subprocess.Popen([haproxy, "-db", "-f", str(config)], stdin=subprocess.DEVNULL,
                                      start_new_session=True, preexec_fn=_die_with_parent)  # noqa: PLW1509
             time.sleep(0.5)
@@ -251,15 +278,14 @@ def serve_hall(settings, workers: int, first_worker_port: int | None, allow_orig
                 return 1
             print(f"AMB estimation lab: open {shown_url(host, port)} in a browser "
                   f"({workers} lab processes behind HAProxy; Ctrl+C to stop)", flush=True)
-            if settings.token is not None:
-                how = "generated; set your own with --token" if settings.token_generated else "from --token"
-                print(f"Class token: {settings.token} ({how}); every new tab asks for it", flush=True)
+            for line in settings.token_lines():
+                print(line, flush=True)
             while True:
                 time.sleep(POLL_S)
                 if proxy.poll() is not None:
                     print(f"error: HAProxy exited (status {proxy.returncode}); stopping", file=sys.stderr)
                     return 1
-                _supervise(pool)
+                supervise(pool)
         except _Stop:
             return 0
         finally:
@@ -270,8 +296,9 @@ def serve_hall(settings, workers: int, first_worker_port: int | None, allow_orig
                 signal.signal(s, handler)
 
 
-def _supervise(pool: list[Worker]) -> None:
-    """Restart exited workers (after a delay that grows while they keep crashing)."""
+def supervise(pool: list[Worker]) -> None:
+    """Restart exited workers (after a delay that grows while they keep crashing), saying when
+    they will answer again (the delay plus what their last start took) and when they do."""
     now = time.monotonic()
     for worker in pool:
         if worker.restart_at is not None:
@@ -280,12 +307,20 @@ def _supervise(pool: list[Worker]) -> None:
             continue
         status = worker.process.poll()
         if status is None:
+            if worker.exited_at is not None and _ready(worker.url):
+                worker.start_s = time.monotonic() - worker.started
+                print(f"lab process {worker.index} (port {worker.port}) answers again, "
+                      f"{time.monotonic() - worker.exited_at:.0f} s after it exited", file=sys.stderr, flush=True)
+                worker.exited_at = None
             continue
         worker.crashes = 0 if now - worker.started > STABLE_AFTER_S else worker.crashes + 1
         delay = RESTART_DELAYS_S[min(worker.crashes, len(RESTART_DELAYS_S)) - 1] if worker.crashes else 0.0
-        print(f"lab process {worker.index} (port {worker.port}) exited with status {status}; "
-              f"restarting{f' in {delay:.0f} s' if delay else ''} (HAProxy routes new tabs to the others)",
+        back = (f"; it answers again in about {delay + worker.start_s:.0f} s (its last start took "
+                f"{worker.start_s:.0f} s)") if worker.start_s is not None else ""
+        print(f"lab process {worker.index} (port {worker.port}) exited with status {status}; restarting "
+              f"{f'in {delay:.0f} s' if delay else 'now'}{back}; HAProxy routes new tabs to the others",
               file=sys.stderr, flush=True)
+        worker.exited_at = worker.exited_at or now
         worker.restart_at = now + delay
         if not delay:
             worker.start()

@@ -11,6 +11,7 @@ and a browser page from another origin cannot open a tab at all.
 from __future__ import annotations
 
 import ctypes
+import os
 import socket
 import sys
 import threading
@@ -30,6 +31,7 @@ from lab_modules.scenes.bearing import CAMERA_POSITION
 
 USAGE_ERROR = 2
 SWITCH_INTERVAL_S = 0.001
+RETURN_MEMORY_EVERY_S = 2.0       # a closed tab's memory goes back to the system within about this
 
 
 @dataclass
@@ -41,22 +43,40 @@ class Settings:
     exercise: str = "kalman_noise"
     data_dir: Path | None = None
     token: str | None = None               # None: no token asked (loopback only)
-    token_generated: bool = False
+    token_source: str = ""                 # "generated", "from --token", ...
     origins: access.OriginPolicy = field(default_factory=access.OriginPolicy)
+    max_tabs: int = access.TABS_PER_PROCESS
+    trusted_proxies: frozenset[str] = frozenset()
 
     @classmethod
     def from_args(cls, args) -> Settings:
         host = access.check_host(args.host)
         port = access.check_port(args.port)
         get(args.exercise)
-        token, generated = None, False
-        if args.token is not None:
-            token = access.check_token(args.token)
-        elif not access.is_loopback(host):
-            token, generated = access.new_token(), True
+        token, source = access.chosen_token(args.token, args.token_file, os.environ)
+        if token is None and not access.is_loopback(host):
+            token, source = access.new_token(), "generated"
         return cls(host=host, port=port, exercise=args.exercise,
                    data_dir=Path(args.data_dir) if args.data_dir else None, token=token,
-                   token_generated=generated, origins=access.OriginPolicy(args.allow_origin or ()))
+                   token_source=source, origins=access.OriginPolicy(args.allow_origin or (), host),
+                   max_tabs=access.check_max_tabs(args.max_tabs),
+                   trusted_proxies=frozenset(access.check_host(a) for a in args.trusted_proxy or ()))
+
+    def token_lines(self) -> list[str]:
+        """What the server prints about the class token at start (a weak chosen one is warned of)."""
+        if self.token is None:
+            return []
+        how = "generated; choose one with --token-file or $" + access.TOKEN_VARIABLE \
+            if self.token_source == "generated" else self.token_source
+        lines = [f"Class token: {self.token} ({how}); every new tab asks for it"]
+        bits = access.token_bits(self.token)
+        if self.token_source != "generated" and bits < access.STRONG_TOKEN_BITS:
+            lines.append(f"warning: this token can be guessed (at most {bits:.0f} bits): wrong tries are "
+                         f"throttled, but a generated one is safer (leave the token out)")
+        if self.token_source == "from --token":
+            lines.append("note: --token shows in the process list to every user of this machine: "
+                         f"--token-file FILE or ${access.TOKEN_VARIABLE} do not")
+        return lines
 
 
 
@@ -117,7 +137,7 @@ def serve(settings: Settings) -> int:
     starting on ``settings.exercise`` (each tab can switch).  Returns the exit status."""
     try:
         access.check_bindable(settings.host, settings.port)
-        store = Store(settings.data_dir)
+        store = Store(settings.data_dir, log_failures=True)
     except (ParameterError, StoreError) as error:
         print(f"error: {error}", file=sys.stderr)
         return USAGE_ERROR
@@ -129,7 +149,8 @@ def serve(settings: Settings) -> int:
     chosen = get(settings.exercise)
     chosen.simulation(chosen.resolve({})).advance(1)       # compile the loop before the first tab
     _limit_malloc_arenas()
-    traffic.wake_on_the_loop()
+    traffic.prepare()                                      # before the server accepts a connection
+    traffic.wake_on_the_loop()                             # before viser makes its message buffers
     server = viser.ViserServer(host=settings.host, port=settings.port, label="AMB estimation lab", verbose=False)
     if server.get_port() != settings.port:                 # taken between the check and the start
         server.stop()
@@ -142,14 +163,14 @@ def serve(settings: Settings) -> int:
     server.initial_camera.look_at = (0.0, 0.0, 0.0)
     sessions: dict[int, LabSession] = {}
     lock = threading.Lock()
+    closed_tabs = threading.Event()          # a tab closed since the freed memory was last returned
+    limits = access.Limits(admission=access.Admission(settings.max_tabs))
 
     def report(client_id: int, text: str) -> None:
         with lock:
             session = sessions.get(client_id)
         if session is not None:
             session.report(text)
-
-    policy = traffic.install(server, report)
 
     # Both callbacks are async: they run on the event loop, in order, so a tab that closes
     # while its lab is still being built is always found and stopped (its worker builds it).
@@ -162,8 +183,11 @@ def serve(settings: Settings) -> int:
             print(f"refused a tab from origin {origin!r} (serving {host_header!r})", file=sys.stderr, flush=True)
             policy.close(client.client_id, "origin not allowed")
             return
+        forwarded = ",".join(headers.get_all("X-Forwarded-For")) if headers is not None else None
+        address = access.client_address(policy.peer(client.client_id), forwarded, settings.trusted_proxies)
         session = LabSession(client, chosen, store, settings.token,
-                             on_refused=lambda reason: policy.close(client.client_id, reason))
+                             on_refused=lambda reason: policy.close(client.client_id, reason), limits=limits,
+                             address=address)
         with lock:
             sessions[client.client_id] = session
 
@@ -174,17 +198,23 @@ def serve(settings: Settings) -> int:
         policy.forget(client.client_id)
         if session is not None:
             session.close()
-        _return_freed_memory()
+        closed_tabs.set()
+
+    # Last: a tab's messages wait for the policy (``traffic.prepare``), so every tab, also one that
+    # connected while the server was being set up, meets it and the callbacks above.
+    policy = traffic.install(server, report)
 
     url = shown_url(settings.host, server.get_port())
     print(f"AMB estimation lab: open {url} in a browser (Ctrl+C to stop)", flush=True)
-    if settings.token is not None:
-        how = "generated; set your own with --token" if settings.token_generated else "from --token"
-        print(f"Class token: {settings.token} ({how}); every new tab asks for it", flush=True)
-    print(f"Saved experiments: {store.path}", flush=True)
+    for line in settings.token_lines():
+        print(line, flush=True)
+    print(f"Saved experiments: {store.path}; at most {settings.max_tabs} tabs (--max-tabs)", flush=True)
     try:
         while True:
-            time.sleep(1.0)
+            time.sleep(RETURN_MEMORY_EVERY_S)
+            if closed_tabs.is_set():          # after the closed tabs' threads ended and freed their memory
+                closed_tabs.clear()
+                _return_freed_memory()
     except KeyboardInterrupt:
         server.stop()
     return 0

@@ -421,6 +421,12 @@ def _roots(f, omega: np.ndarray, values: np.ndarray) -> list[float]:
     return found
 
 
+def _closed_loop_stable(open_loop, gain: float) -> bool:
+    """Whether u = -gain · y closes ``open_loop`` stably (poles inside the unit circle, or left half-plane)."""
+    poles = np.asarray(control.feedback(gain * open_loop, 1).poles())
+    return bool(np.all(np.abs(poles) < 1.0)) if open_loop.dt else bool(np.all(poles.real < 0))
+
+
 def loop_margins(open_loop, omega: np.ndarray | None = None) -> Margins:
     """Margins from the frequency response on ``omega`` (log grid to Nyquist by default):
     phase crossovers where Im L changes sign with Re L < 0 and gain crossovers where |L| = 1,
@@ -446,9 +452,11 @@ def loop_margins(open_loop, omega: np.ndarray | None = None) -> Margins:
     phase_margins = [(float(np.degrees(np.angle(-at(w)))), w)
                      for w in _roots(lambda w: abs(at(w)) - 1.0, omega, np.abs(L) - 1.0)]
     pm, wc = min(phase_margins, key=lambda p: abs(p[0]), default=(np.inf, np.nan))
-    closed = control.feedback(open_loop, 1)
-    poles = np.asarray(closed.poles())
-    stable = bool(np.all(np.abs(poles) < 1.0)) if open_loop.dt else bool(np.all(poles.real < 0))
+    stable = _closed_loop_stable(open_loop, 1.0)
+    if not stable:
+        # with several unstable closed-loop poles, a crossing of -1 may move one pair and leave others:
+        # only the gain factors where stability changes are margins
+        gains = [g for g in gains if _closed_loop_stable(open_loop, 0.99 * g) != _closed_loop_stable(open_loop, 1.01 * g)]
     values = 1.0 / np.abs(1.0 + L)
     k = int(np.argmax(values))
     lo, hi = omega[max(k - 1, 0)], omega[min(k + 1, len(omega) - 1)]

@@ -11,7 +11,7 @@ import math
 import re
 from collections.abc import Iterable
 from dataclasses import dataclass
-from functools import cache
+from functools import cache, cached_property
 
 
 class ParameterError(ValueError):
@@ -86,12 +86,18 @@ class Parameter:
         return f"{self.minimum:.10g} ... {self.maximum:.10g}{unit}"
 
     def parse(self, value) -> float | str:
-        """Check one value (number or text) and return it in the parameter's type."""
+        """Check one value (number or text) and return it in the parameter's type.  A number
+        written as text takes the digits 0-9 only: Python would also read other scripts' digits
+        ("١٠", "１０") and digit groups with underscores ("1_0") as numbers, which a lab reading
+        a student's or a script's input should refuse rather than guess."""
         if self.choices:
             text = str(value).strip()
             if text not in self.choices:
                 raise ParameterError(f"{self.name}={value!r} is not valid: expected {self.valid_range()}")
             return text
+        if isinstance(value, str) and (not value.isascii() or "_" in value):
+            raise ParameterError(f"{self.name}={value!r} is not a number (digits 0-9 only): "
+                                 f"expected {self.valid_range()}")
         try:
             number = float(value)
         except (TypeError, ValueError):
@@ -107,9 +113,10 @@ class Parameter:
             return int(number)
         return number
 
-    @property
+    @cached_property
     def numeric(self) -> bool:
-        """A number, or a choice among numbers (their texts, e.g. "-0.5" mm)."""
+        """A number, or a choice among numbers (their texts, e.g. "-0.5" mm); kept, as ``in_si``
+        asks it of every control each time an exercise builds its set-up."""
         return all(_is_number(choice) for choice in self.choices)
 
     def si(self, values: dict) -> float:

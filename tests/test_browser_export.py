@@ -40,7 +40,7 @@ def test_export_downloads_and_inspector_steps(open_tab, tmp_path):
     with page.expect_download(timeout=30000) as download:
         page.get_by_role("button", name="Scope window (CSV)").click()
     name = download.value.suggested_filename
-    assert re.fullmatch(r"kalman_noise_KN-[A-Z0-9]{4}_\d{8}-\d{6}_scope\.csv", name), name
+    assert re.fullmatch(r"kalman_noise_KN-[A-Z0-9]{4}-[A-Z0-9]{4}-[A-Z0-9]{4}_\d{8}-\d{6}_scope\.csv", name), name
     path = tmp_path / name
     download.value.save_as(path)
     lines = [line for line in path.read_text().splitlines() if not line.startswith("#")]

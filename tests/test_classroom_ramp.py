@@ -20,6 +20,7 @@ from pathlib import Path
 import pytest
 
 from app.commands.load_bench import STALL_S, Tab, lab_server, scope_titles
+from tests.wsclient import run_async
 
 pytestmark = pytest.mark.classroom
 
@@ -67,7 +68,7 @@ def _limit(figures: list[float], floor_s: float) -> float:
 def test_every_tab_of_a_ramp_streams_from_its_first_seconds_and_none_stalls(tmp_path: Path):
     with lab_server(PORT, 1, "kalman_noise", tmp_path / "lab.log"):
         began = time.perf_counter()
-        opened, ended = asyncio.run(_ramp(f"ws://127.0.0.1:{PORT}", scope_titles("kalman_noise")))
+        opened, ended = run_async(_ramp(f"ws://127.0.0.1:{PORT}", scope_titles("kalman_noise")))
     silent = {number: tab.closed for number, (tab, _) in enumerate(opened, 1) if not tab.scope_times}
     assert not silent, f"tabs that never got a scope update (and why they ended): {silent}"
     starts = {number: tab.scope_times[0] - at for number, (tab, at) in enumerate(opened, 1)}

@@ -198,3 +198,51 @@ def test_browser_through_haproxy(tmp_path, browser):
             assert not tab.errors, tab.errors
         finally:
             tab.page.close()
+
+
+def test_configuration_caps_connections_per_process(tmp_path):
+    from app.hall import PAGE_LOADS
+    config = haproxy_config("0.0.0.0", 8080, [("127.0.0.1", 8081), ("127.0.0.1", 8082)], max_tabs=60)
+    assert config.count(f"maxconn {60 + PAGE_LOADS}") == 2 and "timeout queue" in config
+    assert "The lab is full" in config
+    assert "    server lab1 10.0.0.5:8080\n" in haproxy_config("0.0.0.0", 80, [("10.0.0.5", 8080)])   # no cap
+    if HAPROXY is None:
+        pytest.skip("HAProxy is not installed")
+    path = tmp_path / "haproxy.cfg"
+    path.write_text(config)
+    checked = subprocess.run([HAPROXY, "-c", "-f", str(path)], check=False, capture_output=True, text=True)
+    assert checked.returncode == 0, checked.stdout + checked.stderr
+
+
+def test_a_restart_says_when_the_process_answers_again(monkeypatch, capsys):
+    """The supervisor announces the restart delay plus what the process's last start took, and
+    says when it answers again (a killed worker once announced 1 s and answered after 23 s)."""
+    from app import hall
+    now = [1000.0]
+    answering = {"yes": False}
+    monkeypatch.setattr(hall.time, "monotonic", lambda: now[0])
+    monkeypatch.setattr(hall, "_ready", lambda url: answering["yes"])
+
+    class Process:
+        def __init__(self, status=None):
+            self.status = status
+
+        def poll(self):
+            return self.status
+    def start(self) -> None:                                   # what Worker.start records, without a process
+        self.process, self.started, self.restart_at = Process(), now[0], None
+    monkeypatch.setattr(hall.Worker, "start", start)
+    worker = hall.Worker(1, 8081, ["lab"], {}, process=Process(), started=990.0, start_s=22.0)
+    worker.process.status = -9                                 # killed 10 s after it started
+    hall.supervise([worker])
+    announced = capsys.readouterr().err
+    assert "restarting in 1 s; it answers again in about 23 s (its last start took 22 s)" in announced
+    now[0] += 1.0
+    hall.supervise([worker])                                  # started again
+    now[0] += 21.5
+    hall.supervise([worker])
+    assert capsys.readouterr().err == ""                       # not answering yet: nothing said
+    answering["yes"] = True
+    hall.supervise([worker])
+    assert "answers again, 22 s after it exited" in capsys.readouterr().err
+    assert worker.start_s == pytest.approx(21.5) and worker.exited_at is None

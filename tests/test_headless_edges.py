@@ -106,7 +106,7 @@ def test_save_then_run_code_reproduces_the_run(tmp_path, capsys):
     assert main(["save", "kalman_noise", "--set", "gain_factor=1.5", "--set", "feedback=estimated",
                  "--data-dir", data_dir]) == 0
     code = capsys.readouterr().out.strip()
-    assert len(code) == 7 and code.startswith("KN-")
+    assert len(code) == len("KN-7Q3M-X9TA-HPRW") and code.startswith("KN-")      # 12 random characters
     assert main(["run", "--code", code.lower(), "--json", "--duration", "0.3", "--data-dir", data_dir]) == 0
     by_code = json.loads(capsys.readouterr().out)
     assert main(["run", "kalman_noise", "--set", "gain_factor=1.5", "--set", "feedback=estimated",

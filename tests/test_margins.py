@@ -100,6 +100,7 @@ VARIANTS = {
     "thrust_liftoff": [{}, {"feedback": "estimated"}, {"current_loop": "off"}],
     "adaptive_filter": [{}, {"feedback": "measured"}, {"feedback": "ekf"}],
     "stiffness_map": [{}],
+    "rotor_at_speed": [{}, {"feedback": "estimated"}, {"sensor_offset_mm": 60.0}],
 }
 CASES = [(name, settings) for name, variants in VARIANTS.items() for settings in variants]
 

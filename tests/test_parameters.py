@@ -17,6 +17,7 @@ CURRENT = Parameter("current_noise_a", "Current noise", "A", 1.87, 0.0, 5.0)
 @pytest.mark.parametrize("unit, factor", [
     ("µs", 1e-6), ("ms", 1e-3), ("µm", 1e-6), ("mm", 1e-3), ("mA", 1e-3), ("mV", 1e-3), ("%", 1e-2),
     ("A/mm", 1e3), ("A/(mm·s)", 1e3), ("A·s/mm", 1e3), ("N/µm", 1e6), ("N·mm²/A²", 1e-6), ("mm⁴/A⁴", 1e-12),
+    ("rpm", 2 * np.pi / 60), ("rpm/s", 2 * np.pi / 60),
 ])
 def test_scaled_units_have_their_factor(unit, factor):
     assert si_factor(unit) == factor

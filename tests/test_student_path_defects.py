@@ -129,7 +129,8 @@ def test_independent_samples_of_an_ar1_sequence():
 # -- defect 14: every readout is a plain name with its unit and a number (or a clear word) -----------
 FORMULA_MARKS = ("=", "√", "e^(", "1/L", "²h", "Kd·", "·Kp")
 UNIT_WORDS = ("…", "#", ",", " and", "of ", "mode")
-WORDS = {"touched down", "not reached", "computing …", "none"} | {f"mode {j}" for j in range(1, 7)}
+WORDS = ({"touched down", "not reached", "computing …", "none", "stable", "unstable"}
+         | {f"mode {j}" for j in range(1, 7)} | {f"zone {z}" for z in "ABCD"})
 
 
 def _check_readouts(name: str, readouts) -> None:
@@ -151,7 +152,7 @@ def _check_readouts(name: str, readouts) -> None:
 
 @pytest.mark.parametrize("name", ["kalman_noise", "ekf_parameters", "ekf_disturbance", "lqg_vs_pid",
                                   "sensor_placement", "maglev_tracking", "maglev_tuning", "thrust_liftoff",
-                                  "self_sensing", "stiffness_map", "adaptive_filter"])
+                                  "self_sensing", "stiffness_map", "adaptive_filter", "rotor_at_speed"])
 def test_readouts_are_names_units_and_numbers(name):
     from lab_modules.exercises import Analysis
     exercise = get(name)

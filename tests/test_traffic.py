@@ -10,10 +10,11 @@ import threading
 from typing import Self
 
 import pytest
+import viser
 import viser._messages as viser_messages
 from viser.infra._async_message_buffer import AsyncMessageBuffer
 
-from app.infra import traffic
+from app.infra import traffic, viser_internals
 
 MESSAGE = viser_messages.GuiUpdateMessage(uuid="scope", updates={"value": 1.0})
 WAIT_S = 10.0           # a bound on a wait that ends at once when the writer wakes
@@ -105,3 +106,19 @@ def test_every_push_from_another_thread_wakes_the_writer(atomic: bool):
         for _ in range(20):
             _push_from_a_thread(buffer, atomic)
             assert writer.windows.get(timeout=WAIT_S) == 1
+
+
+def test_viser_internals_find_a_control_and_free_an_upload():
+    """What the upload and update checks touch inside viser (pinned release): a control's handle by
+    its uuid, and the parts viser buffers of an unfinished upload, which ``forget_upload`` frees."""
+    server = viser.ViserServer(host="127.0.0.1", port=8474, verbose=False)
+    try:
+        dropdown = server.gui.add_dropdown("Exercise", ("a", "b"))
+        assert viser_internals.gui_input_handle(server, None, dropdown._impl.uuid) is dropdown
+        assert viser_internals.gui_input_handle(server, None, "no such control") is None
+        buffered = server.gui._current_file_upload_states         # what forget_upload frees
+        buffered["t"] = {"parts": [b"x" * 1000]}
+        viser_internals.forget_upload(server, None, "t")
+        assert "t" not in buffered
+    finally:
+        server.stop()

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import stat
 import sys
 from pathlib import Path
 
@@ -36,17 +38,38 @@ def overrides_from(pairs: list[str], seed=None, exercise=None) -> dict:
     return overrides
 
 
-def duration_from(text, default: float) -> float:
+MAX_DURATION_S = 60.0
+BENCH_SECONDS = (0.1, 60.0)       # simulated seconds per benchmark measurement
+
+
+def bench_seconds(text) -> float:
+    """``bench --seconds`` in ``BENCH_SECONDS``, or ``ParameterError`` (NaN, negative or huge
+    values would fail deep inside or ask for terabytes of trace)."""
+    low, high = BENCH_SECONDS
+    expected = f"expected {low:g} ... {high:g} s"
+    try:
+        value = float(text)
+    except (TypeError, ValueError):
+        raise ParameterError(f"--seconds={text!r} is not a number: {expected}") from None
+    if not math.isfinite(value) or not low <= value <= high:
+        raise ParameterError(f"--seconds={text!r} is out of range: {expected}")
+    return value
+
+
+def duration_from(text, default: float, minimum: float = 0.01) -> float:
+    """``--duration`` in ``minimum`` ... ``MAX_DURATION_S`` seconds (the exercise's shortest run
+    whose metrics are defined), or ``ParameterError``."""
+    expected = f"expected {minimum:g} ... {MAX_DURATION_S:g} s"
     if text is None:
         return default
     try:
         value = float(text)
     except ValueError:
-        raise ParameterError(f"--duration={text!r} is not a number: expected 0.01 ... 60 s") from None
+        raise ParameterError(f"--duration={text!r} is not a number: {expected}") from None
     if not math.isfinite(value):
-        raise ParameterError(f"--duration={text!r} is not finite: expected 0.01 ... 60 s")
-    if not 0.01 <= value <= 60.0:
-        raise ParameterError(f"--duration={text!r} is out of range: expected 0.01 ... 60 s")
+        raise ParameterError(f"--duration={text!r} is not finite: {expected}")
+    if not minimum <= value <= MAX_DURATION_S:
+        raise ParameterError(f"--duration={text!r} is out of range: {expected}")
     return value
 
 
@@ -84,6 +107,9 @@ def read_data_file(exercise, path) -> tuple[str, bytes] | None:
     if exercise.data_description is None:
         raise ParameterError(f"exercise {exercise.name!r} takes no --data file")
     try:
+        mode = os.stat(path).st_mode
+        if stat.S_ISFIFO(mode) or stat.S_ISSOCK(mode):     # would wait for a writer that may never come
+            raise ParameterError(f"--data {path!r} is a pipe or socket, not a file")
         with open(path, "rb") as handle:
             content = handle.read(MAX_BYTES + 1)
     except OSError as error:
@@ -138,7 +164,7 @@ def command_run(args) -> int:
         data_file = (saved.recording_name, saved.recording)
     data = exercise.load_data(*data_file) if data_file else None
     values = exercise.resolve({**overrides, "data": data})
-    duration = duration_from(args.duration, exercise.default_duration_s)
+    duration = duration_from(args.duration, exercise.default_duration_s, exercise.min_duration_s)
     shown = {name: value for name, value in values.items() if name != "data"}
     if data_file is not None:
         shown["data"] = args.data or data_file[0]

@@ -9,10 +9,13 @@ and hands every one to its handlers (GUI updates become thread-pool jobs).
   none in the last ``COALESCE_S``; otherwise only the newest value is kept and
   passed on when that interval is over.  A burst of 10,000 slider updates
   costs their decoding and one dispatch per control per interval;
-- **checks uploads**: a declared size above ``MAX_UPLOAD_BYTES`` is refused
-  before any part is accepted, and parts beyond the declared size are dropped;
+- **checks uploads** against ``uploads.Uploads`` (a size limit per file, one unfinished upload
+  per tab, a budget per process, stale uploads dropped and their parts freed);
 - **answers invalid messages** (undecodable, or rejected by a handler) in the
-  tab through ``Traffic.report`` and logs one line per client, not per message.
+  tab through ``Traffic.report`` and logs one line per client, not per message;
+  a GUI update may only change a control's ``value`` (what a browser sends: a
+  tab could otherwise set a control's internal attributes, such as its
+  callbacks), and a dropdown's value must be one of its options.
 
 The origin check needs the websocket's request headers: ``headers`` finds
 them by client id.
@@ -37,10 +40,11 @@ import viser.infra._infra as infra
 from viser import _messages
 from viser.infra._async_message_buffer import AsyncMessageBuffer
 
+from app.infra import viser_internals
+from app.infra.uploads import MAX_UPLOAD_BYTES, Uploads, describe_bytes
+
 #: A control's updates are acted on at most once per this interval [s] (newest value wins).
 COALESCE_S = 0.02
-#: Largest upload accepted (the recordings' limit).
-MAX_UPLOAD_BYTES = 20_000_000
 #: Share of the event loop one connection's messages may take, and the burst it may take at once [s].
 LOOP_SHARE = 0.05
 LOOP_BURST_S = 0.02
@@ -62,7 +66,10 @@ class Traffic:
         self.logged: set[int] = set()
         self.reported: dict[int, int] = {}
         self.lock = threading.Lock()
-        self.stats = {"received": 0, "dispatched_updates": 0, "coalesced": 0, "invalid": 0, "refused_uploads": 0}
+        self.uploads = Uploads()           # touched on the event loop only
+        self.sweep_scheduled = False
+        self.stats = {"received": 0, "dispatched_updates": 0, "coalesced": 0, "invalid": 0, "refused_uploads": 0,
+                      "dropped_uploads": 0}
 
     # -- lookups ------------------------------------------------------------------
     def _connections(self) -> dict:
@@ -80,6 +87,11 @@ class Traffic:
         request = getattr(connection, "request", None)
         return None if request is None else request.headers
 
+    def peer(self, client_id: int) -> str | None:
+        """The address a connected client's websocket comes from (None once it is gone)."""
+        address = getattr(self._connections().get(client_id), "remote_address", None)
+        return str(address[0]) if address else None
+
     def close(self, client_id: int, reason: str) -> None:
         """Close a client's websocket (policy violation) from any thread or the event loop."""
         connection = self._connections().get(client_id)
@@ -95,6 +107,35 @@ class Traffic:
             loop.create_task(coroutine)
         else:
             asyncio.run_coroutine_threadsafe(coroutine, loop)
+
+    # -- GUI updates --------------------------------------------------------------------
+    def refused_update(self, client_id: int | None, message) -> str | None:
+        """Why a tab's GUI update is refused (None: pass it on): only a control's value, and for a
+        dropdown one of its options."""
+        if not isinstance(message.updates, dict):
+            return "malformed GUI update"
+        if set(message.updates) != {"value"}:
+            return "a change of a control the browser never sends"
+        handle = viser_internals.gui_input_handle(self.server, client_id, message.uuid)
+        if isinstance(handle, viser.GuiDropdownHandle) and message.updates["value"] not in handle.options:
+            return "a choice the control does not offer"
+        return None
+
+    # -- uploads ----------------------------------------------------------------------
+    def free_uploads(self, keys) -> None:
+        """Forget unfinished uploads and free the parts viser holds of them (on the event loop)."""
+        self.uploads.drop(keys)
+        for client_id, transfer in keys:
+            self.stats["dropped_uploads"] += 1
+            viser_internals.forget_upload(self.server, client_id, transfer)
+
+    def sweep_uploads(self) -> None:
+        """Drop stale uploads, and look again while any upload is unfinished (on the event loop)."""
+        loop = asyncio.get_running_loop()
+        self.free_uploads(self.uploads.stale(loop.time()))
+        self.sweep_scheduled = bool(self.uploads.transfers)
+        if self.sweep_scheduled:
+            loop.call_later(self.uploads.stale_s / 2, self.sweep_uploads)
 
     # -- invalid input ----------------------------------------------------------------
     def invalid(self, client_id: int | None, what: str) -> None:
@@ -112,22 +153,32 @@ class Traffic:
             self.report_to_tab(client_id, f"The lab ignored a message it could not use ({what}).")
 
     def forget(self, client_id: int) -> None:
+        """A tab is gone (on the event loop): so are its unfinished uploads."""
         with self.lock:
             self.logged.discard(client_id)
             self.reported.pop(client_id, None)
+        self.free_uploads(self.uploads.of_client(client_id))
 
 
 _installed: Traffic | None = None
-_original_consumer = infra._message_consumer
 _original_dispatch = infra.WebsockMessageHandler._handle_incoming_message
+#: How often a connection made before ``install`` looks whether the policy is there [s].
+INSTALL_POLL_S = 0.01
+
+
+def prepare() -> None:
+    """Put the reader in front of viser's handlers before the server is made: viser serves as soon
+    as it is made, and a tab that connects in that moment (a class reconnecting to a restarted
+    process) waits for ``install`` instead of passing the policy by."""
+    infra._message_consumer = _consumer
+    infra.WebsockMessageHandler._handle_incoming_message = _guarded_dispatch
 
 
 def install(server: viser.ViserServer, report: Callable[[int, str], None]) -> Traffic:
-    """Put the per-tab policy in front of ``server``'s handlers (one server per process)."""
+    """The per-tab policy for ``server`` (one server per process; ``prepare`` first)."""
     global _installed
+    prepare()
     _installed = Traffic(server, report)
-    infra._message_consumer = _consumer
-    infra.WebsockMessageHandler._handle_incoming_message = _guarded_dispatch
     return _installed
 
 
@@ -139,10 +190,6 @@ async def _guarded_dispatch(self, client_id, message) -> None:
         if _installed is None:
             raise
         _installed.invalid(client_id, f"{type(message).__name__}: {type(error).__name__} {str(error)[:80]}")
-
-
-def _describe_bytes(size: float) -> str:
-    return f"{size / 1e6:.1f} MB"
 
 
 class _Header(msgspec.Struct):
@@ -159,15 +206,13 @@ _COALESCED = {"GuiUpdateMessage", "ViewerCameraMessage"}
 async def _consumer(websocket, handle_message: Callable, message_class) -> None:
     """viser's message reader with coalescing, upload limits, reports and a share of the
     event loop per connection (see the module docstring)."""
+    while _installed is None:                     # connected while the server was being set up
+        await asyncio.sleep(INSTALL_POLL_S)
     traffic = _installed
-    if traffic is None:
-        await _original_consumer(websocket, handle_message, message_class)
-        return
     loop = asyncio.get_running_loop()
     client_id: int | None = None
     pending: dict[str, bytes] = {}                # control uuid (or "camera") -> newest raw update
     last_sent: dict[str, float] = {}              # control uuid -> loop time of its last dispatch
-    uploads: dict[str, list[int]] = {}            # transfer uuid -> [declared bytes, accepted bytes]
     scheduled: set[str] = set()
     allowance, refilled, count = LOOP_BURST_S, time.perf_counter(), 0
 
@@ -185,8 +230,8 @@ async def _consumer(websocket, handle_message: Callable, message_class) -> None:
             return
         last_sent[key] = loop.time()
         message = decode(raw)
-        if isinstance(message, _messages.GuiUpdateMessage) and not isinstance(message.updates, dict):
-            traffic.invalid(client_id, "malformed GUI update")
+        if isinstance(message, _messages.GuiUpdateMessage) and (problem := traffic.refused_update(client_id, message)):
+            traffic.invalid(client_id, problem)
         elif message is not None:
             traffic.stats["dispatched_updates"] += 1
             handle_message(message)
@@ -225,27 +270,38 @@ async def _consumer(websocket, handle_message: Callable, message_class) -> None:
         if isinstance(message, _messages.FileTransferStartUpload):
             declared = message.size_bytes
             if not isinstance(declared, int) or not isinstance(message.part_count, int) or declared < 0 \
-                    or message.part_count < 0:
+                    or message.part_count < 0 or not isinstance(message.transfer_uuid, str):
                 traffic.invalid(client_id, "malformed upload")
                 return
             if declared > MAX_UPLOAD_BYTES:
                 traffic.stats["refused_uploads"] += 1
                 if client_id is not None:
-                    traffic.report_to_tab(client_id, f"The file is {_describe_bytes(declared)}; the largest "
-                                                     f"accepted is {_describe_bytes(MAX_UPLOAD_BYTES)}.")
+                    traffic.report_to_tab(client_id, f"The file is {describe_bytes(declared)}; the largest "
+                                                     f"accepted is {describe_bytes(MAX_UPLOAD_BYTES)}.")
                 return
-            uploads[message.transfer_uuid] = [declared, 0]
+            accepted, dropped = traffic.uploads.start(client_id, message.transfer_uuid, declared, loop.time())
+            traffic.free_uploads(dropped)
+            if not accepted:
+                traffic.stats["refused_uploads"] += 1
+                if client_id is not None:
+                    traffic.report_to_tab(client_id, "The lab is receiving other files just now: "
+                                                     "load yours again in a minute.")
+                return
+            if not traffic.sweep_scheduled:
+                traffic.sweep_scheduled = True
+                loop.call_later(traffic.uploads.stale_s / 2, traffic.sweep_uploads)
         elif isinstance(message, _messages.FileTransferPart):
-            budget = uploads.get(message.transfer_uuid)
             content = message.content
-            if budget is None or not isinstance(content, bytes) or budget[1] + len(content) > budget[0]:
-                if budget is not None:
-                    uploads.pop(message.transfer_uuid, None)
-                    traffic.invalid(client_id, "upload parts beyond the declared size")
+            if not isinstance(content, bytes) or not isinstance(message.transfer_uuid, str):
+                traffic.invalid(client_id, "malformed upload part")
                 return
-            budget[1] += len(content)
-            if budget[1] == budget[0]:
-                uploads.pop(message.transfer_uuid, None)
+            progress = traffic.uploads.part(client_id, message.transfer_uuid, len(content), loop.time())
+            if progress is None:
+                return
+            if progress == "overflow":
+                traffic.free_uploads([(client_id, message.transfer_uuid)])
+                traffic.invalid(client_id, "upload parts beyond the declared size")
+                return
         handle_message(message)
 
     while True:

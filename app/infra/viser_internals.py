@@ -10,3 +10,17 @@ def send_data(handle, data: tuple) -> None:
     setter casts every column to float64 (twice the bytes of the float32 the scope sends)."""
     handle._impl.props.data = data
     handle._queue_update("data", data)
+
+
+def gui_input_handle(server, client_id: int | None, uuid: str):
+    """The handle of the control a client's GUI update addresses (its own or a shared one), or None."""
+    client = server._connected_clients.get(client_id)
+    return getattr(client, "gui", server.gui)._gui_input_handle_from_uuid.get(uuid)
+
+
+def forget_upload(server, client_id: int | None, transfer: str) -> None:
+    """Drop the parts viser buffers of an unfinished upload (it keeps them until the last part)."""
+    client = server._connected_clients.get(client_id)
+    for gui in (server.gui, getattr(client, "gui", None)):
+        if gui is not None:
+            gui._current_file_upload_states.pop(transfer, None)

@@ -51,7 +51,8 @@ def read_number(text: str, unit: str = "") -> float:
     """The number in a typed ``text``: a decimal comma ("1,5") counts as a point, spaces (also
     between digit groups) and a trailing ``unit`` are ignored, Unicode minus signs are minus signs,
     exponents ("2e-3", "2E3") are taken. Raises EntryError for an empty text, letters, a comma
-    and a point together ("1,000.5" is ambiguous), NaN and infinity."""
+    and a point together ("1,000.5" is ambiguous), digits other than 0-9 (full-width, Arabic-Indic:
+    the point or comma beside them would not be read either), NaN and infinity."""
     cleaned = str(text).strip()
     if unit and cleaned.endswith(unit):
         cleaned = cleaned[: -len(unit)]
@@ -65,7 +66,7 @@ def read_number(text: str, unit: str = "") -> float:
         if "." in cleaned or cleaned.count(",") > 1:
             raise EntryError("is ambiguous (use one decimal point or one decimal comma)")
         cleaned = cleaned.replace(",", ".")
-    if not re.fullmatch(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?", cleaned):
+    if not re.fullmatch(r"[+-]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?", cleaned):
         raise EntryError("is not a number")
     number = float(cleaned)
     if not math.isfinite(number):

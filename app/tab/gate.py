@@ -1,11 +1,14 @@
-"""The class-token gate: nothing of the lab is built in a tab before its token is right."""
+"""The class-token gate: nothing of the lab is built in a tab before its token is right.  Wrong
+tries count per tab (``TOKEN_ATTEMPTS``, then the tab is closed) and per client address across
+tabs and reconnections (``access.Throttle``)."""
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 
-from app.infra.access import token_matches
+from app.infra.access import Throttle, token_matches
 from app.tab.worker import TabClosed, TabWorker
 
 TOKEN_ATTEMPTS = 5                # wrong class tokens before a tab is disconnected
@@ -16,10 +19,12 @@ class TokenGate:
     """One field asking for the class token, and the count of wrong tries."""
 
     def __init__(self, gui, token: str, worker: TabWorker, enter: Callable[[], None],
-                 refuse: Callable[[str], None]):
+                 refuse: Callable[[str], None], tries: Throttle | None = None, address: str = "unknown"):
         """``enter()`` builds the lab once the token is right (on the worker); ``refuse(reason)``
-        disconnects the tab after ``TOKEN_ATTEMPTS`` wrong tries."""
+        disconnects the tab after ``TOKEN_ATTEMPTS`` wrong tries; ``tries`` counts the wrong tries
+        of the tab's ``address`` across all tabs (beyond its allowance a try is not even checked)."""
         self.token, self.enter, self.refuse = token, enter, refuse
+        self.tries, self.address = tries, address
         self.attempts = 0
         self.entered = False
         gui.add_markdown("### AMB estimation lab\nEnter the class token your instructor gave you.")
@@ -34,10 +39,17 @@ class TokenGate:
         typist would use up the tries, and free checks per keystroke would invite guessing)."""
         if self.entered:                          # already in (a second click)
             return
+        wait_s = self.tries.wait_s(self.address) if self.tries is not None else 0.0
+        if wait_s > 0:                            # not checked: a reconnecting guesser learns nothing
+            self.message.content = (f"⚠️ Too many wrong class tokens from your network: try again in "
+                                    f"{math.ceil(wait_s)} s, or ask your instructor.")
+            return
         if token_matches(self.token, self.field.value):
             self.enter()
             self.entered = True
             return
+        if self.tries is not None:
+            self.tries.failed(self.address)
         self.attempts += 1
         if self.attempts >= TOKEN_ATTEMPTS:
             self.refuse("too many wrong class tokens")

@@ -21,16 +21,19 @@ handles are gone).  A tab closed while its lab is being built stops building.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import sys
 import threading
 import time
 import traceback
+import weakref
 from collections.abc import Callable
 
 import viser
 
 from app.infra import layout
+from app.infra.access import Limits
 from app.infra.store import Store
 from app.panels import entry, page, scope, worksheets
 from app.panels.actions import ActionPanel
@@ -53,25 +56,36 @@ from app.tab.worker import TabClosed, TabWorker
 from lab_modules.exercises import Exercise, registry
 from lab_modules.parameters import Parameter, ParameterError
 
-SETTLE_BEFORE_REMOVAL_S = 0.3     # an exercise switch waits this long between the last chart update and removal
+#: An exercise switch waits this long between the last chart update and the removals: a busy browser
+#: (a slow laptop; Chromium with its CPU slowed fourfold in the tests) gathers the messages of a long
+#: frame into one batch, and 0.3 s was not always enough there.  (A render request would be an exact
+#: barrier, but a browser whose 3D canvas has no size logs an error answering it.)
+SETTLE_BEFORE_REMOVAL_S = 1.0
+FULL = ("### The lab is full\n\nEvery place on this lab server is taken. This tab enters by itself as soon "
+        "as a place is free; or try again in a minute, or ask your instructor.")
 
 
 class LabSession:
     """The lab in one browser tab."""
 
     def __init__(self, client: viser.ClientHandle, exercise: Exercise, store: Store | None = None,
-                 token: str | None = None, on_refused: Callable[[str], None] | None = None):
-        """Cheap: the lab is built on the tab's worker thread (after the class token, if one is set)."""
+                 token: str | None = None, on_refused: Callable[[str], None] | None = None,
+                 limits: Limits | None = None, address: str = "unknown"):
+        """Cheap: the lab is built on the tab's worker thread (after the class token, if one is set,
+        and once ``limits.admission`` has a place for it); ``address``: where the tab comes from."""
         self.client = client
         self.exercises = registry()
         self.token = token
+        self.limits, self.address = limits, address
+        self.admission = limits.admission if limits is not None else None
         self.on_refused = on_refused or (lambda _reason: None)   # disconnects the tab (too many wrong tokens)
         self.gui_lock = threading.RLock()         # writes to the GUI handles; held while the GUI is rebuilt
         self.generations = itertools.count()
         self.generation = next(self.generations)
         self.worker = TabWorker(f"tab-{client.client_id}")
         self.state = LabState()
-        self.saved = SavedExperiments(store, client, self.gui_lock, self.state.snapshot, self.worker)
+        self.saved = SavedExperiments(store, client, self.gui_lock, self.state.snapshot, self.worker,
+                                      self._show_error, limits.code_tries if limits is not None else None, address)
         self.controls = Controls(self.worker, self.state, self.gui_lock, self._apply)
         self.worker.before_event = self.controls.flush_typing
         self.analysis = AnalysisView(client, self.gui_lock, self.state, self.worker, self._current)
@@ -110,21 +124,21 @@ class LabSession:
                 if self.token is None:
                     self._start_restored(exercise)
                 else:
-                    self.gate = TokenGate(self.client.gui, self.token, self.worker,
-                                          lambda: self._enter(exercise), self.on_refused)
+                    self.gate = TokenGate(self.client.gui, self.token, self.worker, lambda: self._enter(exercise),
+                                          self.on_refused, self.limits and self.limits.token_tries, self.address)
             while (events := self.worker.next_events(lambda: self.saved.autosave_due)) is not None:
                 spent = time.thread_time()
                 for action in events:
                     self._do(action)
                 if self.worker.is_due(self.saved.autosave_due):
-                    self._autosave()
+                    self._do(self._autosave)
                 self.worker.pace(time.thread_time() - spent)
         except TabClosed:
             pass
         finally:
             self.close()
             if self.saved.autosave_due is not None:
-                self._autosave()                  # the last changes of a closed tab
+                self._do(self._autosave)          # the last changes of a closed tab
 
     def _do(self, action: Callable[[], None]) -> None:
         """Run one event; an error is shown in the tab (one line), never ends the worker."""
@@ -134,7 +148,7 @@ class LabSession:
             raise
         except Exception as error:  # noqa: BLE001 - any failure of one event is shown, the tab goes on
             traceback.print_exc()
-            self._show_error(f"⚠️ That did not work: {escaped(error)}")
+            self._show_error(f"⚠️ That did not work: {escaped(error) or type(error).__name__}")
 
     def _enter(self, exercise: Exercise) -> None:
         """The class token was right: the lab replaces the gate."""
@@ -143,9 +157,19 @@ class LabSession:
             self._start_restored(exercise)
 
     # -- life cycle ------------------------------------------------------------------
+    def _wait_for_a_place(self) -> None:
+        """Hold the tab at a "the lab is full" note until the process has a place for its lab."""
+        if self.admission is None or self.admission.try_enter(self):
+            return
+        note = self.client.gui.add_markdown(FULL)
+        if not self.admission.wait_to_enter(self, lambda: self.closed):
+            raise TabClosed
+        note.remove()
+
     def _start_restored(self, exercise: Exercise) -> None:
         """Start the experiment this browser autosaved last (a reloaded tab gets its work back),
-        else ``exercise`` on its defaults (call holding ``gui_lock``)."""
+        else ``exercise`` on its defaults (call holding ``gui_lock``), once the lab has a place."""
+        self._wait_for_a_place()
         saved = self.saved.browser_autosave(self.exercises)
         if saved is not None:
             recording = (saved.recording_name, saved.recording) if saved.recording is not None else None
@@ -199,8 +223,8 @@ class LabSession:
             self._start(exercise, overrides, recording)
 
     def _choose(self, title: str) -> None:
-        chosen = next(e for e in self.exercises.values() if e.title == title)
-        if chosen is not self.state.exercise:
+        chosen = next((e for e in self.exercises.values() if e.title == title), None)
+        if chosen is not None and chosen is not self.state.exercise:   # the traffic refuses unknown titles
             self._switch(chosen)
 
     def _current(self, generation: int) -> bool:
@@ -211,6 +235,8 @@ class LabSession:
         """Stop the worker, simulation and analysis threads; the tab is gone (idempotent, any thread)."""
         self.worker.close()
         self.analysis.close()
+        if self.admission is not None:
+            self.admission.leave(self)            # also wakes this tab if it waits for a place
 
     def report(self, text: str) -> None:
         """A one-line message for the tab from outside (e.g. a message the server refused)."""
@@ -298,11 +324,15 @@ class LabSession:
                 self.docks.put_worksheet_beside(gui, toggle.value)
         toggle.on_update(on("beside", put_beside))
 
-        def show_measured(sheet: str, generation: int = self.generation) -> None:
-            with self.gui_lock:
-                if self._current(generation):
-                    self.docks.show_worksheet(sheet)
-        worksheets.when_measured(exercise, show_measured)
+        # The claims may take minutes to measure: a tab closed meanwhile must not be kept alive for them.
+        worksheets.when_measured(exercise, functools.partial(LabSession._show_measured, weakref.proxy(self),
+                                                             self.generation))
+
+    def _show_measured(self, generation: int, sheet: str) -> None:
+        """The worksheet with its claims measured, if ``generation`` still owns the tab."""
+        with self.gui_lock:
+            if self._current(generation):
+                self.docks.show_worksheet(sheet)
 
     def _set_time_axis(self, charts: ScopeCharts, time_axis: str) -> None:
         """The scope's time axis, kept for the tab's next exercises too."""

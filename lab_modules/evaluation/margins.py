@@ -51,8 +51,10 @@ def margin_view(exercise: Exercise, values: dict) -> MarginView:
         if not np.isfinite(m.gain_margin):
             notes.append(f"{name}: the phase of L never crosses −180° above the loop's gain: no upper gain margin.")
         if not m.stable:
-            notes.append(f"{name}: the closed loop is unstable at these settings (zone D); the gain margins "
-                         "say by which factor the loop gain would have to change to cross the stability edge.")
+            notes.append(f"{name}: the closed loop is unstable at these settings (zone D); " + (
+                "the gain margins say by which factor the loop gain would have to change to become stable."
+                if np.isfinite(m.gain_margin) or m.gain_margin_down > 0 else
+                "no change of the loop gain alone makes it stable."))
         magnitude.append((f"|L| {name}", np.abs(L), color))
         phase.append((f"arg L {name}", np.degrees(np.unwrap(np.angle(L))), color))
         sens.append((f"|S| {name}", _decibels_of(1.0 / np.abs(1.0 + L)), color))

@@ -139,6 +139,9 @@ class Exercise:
     parameters: tuple[Parameter, ...]
     charts: tuple[Chart, ...]
     default_duration_s: float = 1.0
+    #: The shortest headless run whose metrics are all defined at the defaults [s] (e.g. one that
+    #: reaches the step its metrics measure); ``run --duration`` refuses less.
+    min_duration_s: float = 0.01
     data_description: str | None = None   # set: the exercise accepts an uploaded CSV
     download_label: str | None = None     # set: a button offers ``download(values)`` as a file
     claims: tuple[Claim, ...] = ()        # the paper's headline results, measured by ``metrics``

@@ -276,6 +276,7 @@ class EkfDisturbance(Exercise):
     worksheet = "ekf_disturbance.md"
     parameters = PARAMETERS
     default_duration_s = 0.25
+    min_duration_s = 0.1             # the force step comes at STEP_TIME_S = 0.05 s; 50 ms of its response
     claims = CLAIMS
     locus = ("pid_gain", CLOSED_LOOP)
     key_readouts = ("Force estimate settling (±5 %)", "Force estimate noise σ",

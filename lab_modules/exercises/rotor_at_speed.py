@@ -333,9 +333,9 @@ class RotorAtSpeed(Exercise):
     parameters = PARAMETERS
     default_duration_s = 0.3
     claims = CLAIMS
-    key_readouts = ("Critical speeds (forward whirl = 1×)", "Closed loop stable at this speed",
-                    "Unbalance: peak orbit at the bearing, 0-12,000 rpm", "Largest orbit radius at the bearing",
-                    "Speed now")
+    key_readouts = ("Closed loop at this speed", "Critical speed 1 (forward whirl meets 1× spin)",
+                    "Unbalance: peak orbit at the bearing, 0-12,000 rpm", "Unbalance: speed of that peak",
+                    "Largest orbit radius at the bearing", "Speed now")
     charts = (
         Chart("Rotor position", "µm", (
             Series("bearing x (x-z plane)", "x_bearing_m", 1e6, "#1f77b4"),
@@ -394,19 +394,19 @@ class RotorAtSpeed(Exercise):
         bearing_here = abs(response_here[LOOP_OUTPUTS.index("r_bearing_m")])
         offset = values["sensor_offset_mm"]
         readouts = [("Speed n", speed, "rpm"), ("Spin frequency n / 60", speed / 60, "Hz"),
-                    ("Sensor", sensor_name(offset), ""),
-                    ("Closed loop stable at this speed", "yes" if at_speed.stable[0] else "no", "")]
-        for j in range(min(n, 4)):
+                    ("Closed loop at this speed", "stable" if at_speed.stable[0] else "unstable", "")]
+        for j in range(min(n, 3)):
             for d, direction in ((0, "backward"), (1, "forward")):
-                readouts.append((f"Closed loop at this speed: mode {j + 1} {direction}, frequency and damping",
-                                 f"{at_speed.whirl_hz[0, j, d]:.1f} Hz, {100 * at_speed.damping[0, j, d]:.2f} %", ""))
-        for j in range(1, min(n, 4)):
-            readouts.append((f"Rotor on its ball bearing: mode {j + 1}, backward / forward",
-                             f"{-free[here, j, 0]:.1f} / {free[here, j, 1]:.1f} Hz at {CAMPBELL_SPEEDS_RPM[here]:.0f} rpm",
-                             ""))
+                whirl = f"Closed loop at this speed: mode {j + 1} {direction} whirl"
+                readouts += [(f"{whirl}, frequency", at_speed.whirl_hz[0, j, d], "Hz"),
+                             (f"{whirl}, damping ratio", 100 * at_speed.damping[0, j, d], "%")]
+        for j in range(1, min(n, 3)):
+            for d, direction in ((0, "backward"), (1, "forward")):
+                label = f"Rotor on its ball bearing at {CAMPBELL_SPEEDS_RPM[here]:.0f} rpm: mode {j + 1} {direction} whirl"
+                readouts.append((label, (-1, 1)[d] * free[here, j, d], "Hz"))
+        readouts += ([(f"Critical speed {k + 1} (forward whirl meets 1× spin)", c, "rpm")
+                      for k, c in enumerate(criticals)] or [("Critical speeds below 12,000 rpm", "none", "")])
         readouts += [
-            ("Critical speeds (forward whirl = 1×)", ", ".join(f"{c:.0f}" for c in criticals) or "none below 12,000",
-             "rpm"),
             (f"Unbalance: U ({values['balance_grade']})", unbalance_kg_m(values) * 1e6, "g·mm"),
             ("Unbalance: force at this speed", unbalance_kg_m(values) * float(np.pi * speed / 30) ** 2, "N"),
             ("Unbalance: orbit at the bearing, this speed", bearing_here * 1e6, "µm"),
@@ -414,13 +414,13 @@ class RotorAtSpeed(Exercise):
              abs(response_here[LOOP_OUTPUTS.index("r_sensor_m")]) * 1e6, "µm"),
             ("Unbalance: control current amplitude, this speed",
              abs(response_here[LOOP_OUTPUTS.index("current_a")]), "A"),
-            ("Unbalance: ISO 14839-2 zone at this speed", iso_14839_2_zone(bearing_here, clearance), ""),
+            ("Unbalance: ISO 14839-2 at this speed", f"zone {iso_14839_2_zone(bearing_here, clearance)}", ""),
         ]
         peak = int(np.argmax(np.abs(response[:, LOOP_OUTPUTS.index("r_bearing_m")])))
         peak_m = abs(response[peak, LOOP_OUTPUTS.index("r_bearing_m")])
-        readouts += [("Unbalance: peak orbit at the bearing, 0-12,000 rpm",
-                      (f"{peak_m * 1e6:.1f} µm at {CAMPBELL_SPEEDS_RPM[peak]:.0f} rpm "
-                       f"(zone {iso_14839_2_zone(peak_m, clearance)})"), "")]
+        readouts += [("Unbalance: peak orbit at the bearing, 0-12,000 rpm", peak_m * 1e6, "µm"),
+                     ("Unbalance: speed of that peak", CAMPBELL_SPEEDS_RPM[peak], "rpm"),
+                     ("Unbalance: ISO 14839-2 at that peak", f"zone {iso_14839_2_zone(peak_m, clearance)}", "")]
         notes = [(f"Sensor: {sensor_name(offset)} at {offset:+.0f} mm from the bearing plane; feedback: "
                   f"{values['feedback']} position. Complex coordinates r = x + i y: a pole with Im s > 0 whirls "
                   "forward (with the spin), Im s < 0 backward."),
@@ -433,8 +433,9 @@ class RotorAtSpeed(Exercise):
         poles = {"open-loop plant": np.linalg.eigvals(plant_and_grid(values)[0].A(float(np.pi * speed / 30))),
                  "closed loop": at_speed_poles(values)}
         midspan = midspan_orbit_m(values, closed)
-        readouts.append((f"Unbalance: peak orbit at mid-span (z = {MIDSPAN_M * 1e3:.0f} mm)",
-                         f"{np.max(midspan) * 1e6:.1f} µm at {CAMPBELL_SPEEDS_RPM[np.argmax(midspan)]:.0f} rpm", ""))
+        readouts += [(f"Unbalance: peak orbit at mid-span, {MIDSPAN_M * 1e3:.0f} mm along the shaft",
+                      np.max(midspan) * 1e6, "µm"),
+                     ("Unbalance: speed of the mid-span peak", CAMPBELL_SPEEDS_RPM[np.argmax(midspan)], "rpm")]
         plots = [campbell_plot(values, free, swept, criticals)]
         yield Analysis(readouts + [("Stability limits against speed", "computing …", "")], poles, notes,
                        plots + [unbalance_plot(values, response, midspan)])
@@ -446,7 +447,7 @@ class RotorAtSpeed(Exercise):
             verdict = ("stable over the whole range" if sensors[name].stable.all() else
                        "unstable over the whole range" if not sensors[name].stable.any() else
                        "; ".join(f"{what} stability at {rpm:.0f} rpm" for rpm, what in changes))
-            readouts.append((f"{name.capitalize()}: at these gains", verdict, ""))
+            notes = notes + [f"{name.capitalize()} sensor at these gains: {verdict}."]
             readouts.append((f"{name.capitalize()}: largest stable gain factor, lowest over speed",
                              float(np.min(limits[name])), "×"))
         plots += [damping_plot(name, sensors[name]) for name in SENSORS]

@@ -197,6 +197,7 @@ class ThrustLiftoff(Exercise):
     worksheet = "thrust_liftoff.md"
     parameters = PARAMETERS
     default_duration_s = 2.0
+    min_duration_s = 0.3             # the lift-off settles within about 0.21 s (its settling-time metric)
     key_readouts = ("Net stiffness of the loop", "Accuracy gain std z / std x̂",
                     "Steady std of true x, raw PID", "Steady std of true x, filter-PID",
                     "Time at the current limit")

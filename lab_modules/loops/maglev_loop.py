@@ -295,6 +295,17 @@ class MaglevSimulation:
                               for M in (discrete.A, discrete.B, discrete.C, discrete.D))
         self.xc = np.zeros(self.lead_lag[0].shape[0])
         self.u0 = setup.plant.equilibrium_voltage_v(setup.reference.base_m)
+        # the kernel's bundles over these arrays, made once (a call of the kernel may be short)
+        self._ball = Ball(state=self.x, constants=self.true_constants,
+                          process_density=np.diag(setup.plant_Q).astype(float),
+                          sensor_variance_m2=setup.sensor_noise_m**2)
+        self._filter = MaglevFilter(kind=FILTERS.index(setup.filter), x_hat=self.x_hat, P=self.P,
+                                    Q=np.asarray(setup.filter_Q, dtype=float), R_m2=setup.sensor_noise_m**2,
+                                    constants=self.constants, substeps=setup.filter_substeps)
+        Ac, Bc, Cc, Dc = self.lead_lag
+        self._control = MaglevControl(kind=CONTROLLERS.index(setup.controller), gain=self.k,
+                                      lead_lag=DiscreteController(state=self.xc, A=Ac, B=Bc, C=Cc, D=Dc),
+                                      u0_v=self.u0)
         self.steps = 0
         self.status = OK
         self.guarded_steps = 0                        # controller steps clamped by the singularity guard
@@ -303,22 +314,13 @@ class MaglevSimulation:
     def advance(self, n_steps: int) -> np.ndarray:
         if self.status != OK or n_steps <= 0:
             return np.zeros((0, 1 + len(TRACE_COLUMNS)))
-        s = self.setup
         refs = self.references.next(n_steps)
         noise = self.rng.standard_normal((n_steps, 3))
         trace = np.empty((n_steps, 1 + len(TRACE_COLUMNS)))
-        Q, plant_q = np.asarray(s.filter_Q, dtype=float), np.diag(s.plant_Q).astype(float)
-        ball = Ball(state=self.x, constants=self.true_constants, process_density=plant_q,
-                    sensor_variance_m2=s.sensor_noise_m**2)
-        ekf = MaglevFilter(kind=FILTERS.index(s.filter), x_hat=self.x_hat, P=self.P, Q=Q, R_m2=s.sensor_noise_m**2,
-                           constants=self.constants, substeps=s.filter_substeps)
-        Ac, Bc, Cc, Dc = self.lead_lag
-        control = MaglevControl(kind=CONTROLLERS.index(s.controller), gain=self.k,
-                                lead_lag=DiscreteController(state=self.xc, A=Ac, B=Bc, C=Cc, D=Dc), u0_v=self.u0)
 
         def part(first: int, last: int) -> tuple[int, int]:
-            return run(last - first, (self.steps + first) * self.sample_time_s, self.sample_time_s, ball, ekf,
-                       control, refs[first:last], noise[first:last], trace[first:last])
+            return run(last - first, (self.steps + first) * self.sample_time_s, self.sample_time_s, self._ball,
+                       self._filter, self._control, refs[first:last], noise[first:last], trace[first:last])
 
         if n_steps == 1:                               # a single step (the inspector's) keeps the prior
             prior = self.x_hat.copy(), self.P.copy()

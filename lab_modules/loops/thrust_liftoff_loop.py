@@ -443,9 +443,8 @@ class LinearLoop:
 
     def output_std(self, sensor_noise_m: float, force_noise_n: float) -> dict[str, float]:
         """Steady-state standard deviation of each output for white noise of these
-        standard deviations (discrete Lyapunov equation, scipy); inf when unstable."""
-        if not self.stable():
-            return {name: float("inf") for name in OUTPUTS}
+        standard deviations (discrete Lyapunov equation, scipy); inf when a mode the noise
+        reaches is unstable."""
         per_sensor, per_force = self.unit_variances
         var = sensor_noise_m**2 * per_sensor + force_noise_n**2 * per_force
         return {name: float(np.sqrt(max(v, 0.0))) for name, v in zip(OUTPUTS, var)}
@@ -458,9 +457,35 @@ class LinearLoop:
         out = []
         for j in range(self.N.shape[1]):
             n = self.N[:, j] / scale
-            X = scale[:, None] * scipy.linalg.solve_discrete_lyapunov(M, np.outer(n, n)) * scale[None, :]
+            Q = excited_subspace(M, n)
+            reached = Q.T @ M @ Q
+            if Q.shape[1] and np.max(np.abs(np.linalg.eigvals(reached))) >= 1.0:
+                out.append(np.full(self.C.shape[0], np.inf))
+                continue
+            X = scale[:, None] * (Q @ scipy.linalg.solve_discrete_lyapunov(reached, np.outer(Q.T @ n, Q.T @ n))
+                                  @ Q.T) * scale[None, :]
             out.append(np.einsum("ij,jk,ik->i", self.C, X, self.C) + self.D[:, j] ** 2)
         return out[0], out[1]
+
+
+def excited_subspace(M: np.ndarray, n: np.ndarray, tolerance: float = 1e-6) -> np.ndarray:
+    """An orthonormal basis Q of the states the noise input ``n`` reaches: span(n, M n, M² n, ...)
+    (Krylov, each new direction orthogonalised twice and kept if more than ``tolerance`` of it is
+    new).  The steady-state covariance X = M X Mᵀ + n nᵀ lives there, X = Q X_q Qᵀ; a mode the noise
+    does not reach, such as the integrator of a PID with Ki = 0 (a pole at z = 1), would make the
+    Lyapunov equation on all states singular."""
+    basis: list[np.ndarray] = []
+    candidates = [n]
+    while candidates and len(basis) < M.shape[0]:
+        vector = candidates.pop()
+        size = np.linalg.norm(vector)
+        for _ in range(2):
+            for q in basis:
+                vector = vector - (q @ vector) * q
+        if size > 0 and np.linalg.norm(vector) > tolerance * size:
+            basis.append(vector / np.linalg.norm(vector))
+            candidates.append(M @ basis[-1])
+    return np.column_stack(basis) if basis else np.zeros((M.shape[0], 0))
 
 
 #: Outputs of ``LinearLoop``: true x, measured z, corrected estimate x̂ [m], current command [A].
