@@ -83,10 +83,6 @@ def test_every_list_under_the_charts_shows_at_most_a_short_table_unfolded(name):
     assert all(len(members) >= 2 for members in groups.values())
 
 
-def test_numbers_written_as_text_keep_their_unit_a_word_does_not():
-    assert readouts.row_markdown("Critical speeds", "9153, 11020", "rpm") == "| Critical speeds | 9153, 11020 | rpm |"
-    assert readouts.row_markdown("Critical speeds", "none", "rpm") == "| Critical speeds | none |  |"
-
 
 # -- ekf_parameters: the convergence time, the k_i axis ------------------------------------------------
 def test_ekf_parameters_reads_when_both_estimates_entered_the_band_and_stayed():

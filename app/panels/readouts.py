@@ -15,15 +15,9 @@ HEADER = ("| quantity | value | unit |", "|---|---:|---|")
 LIVE_GROUP = "This run (scope window)"
 
 
-def is_word(value) -> bool:
-    """Whether a readout's value is a word ("touched down", "yes"), not numbers written as text
-    ("9153, 11020" critical speeds, which keep their unit)."""
-    return isinstance(value, str) and not any(character.isdigit() for character in value)
-
-
 def row_markdown(label: str, value, unit: str) -> str:
     """One table row; a word in place of a number ("touched down") carries no unit."""
-    return f"| {cell(label)} | {readout(value)} | {'' if is_word(value) else cell(unit)} |"
+    return f"| {cell(label)} | {readout(value)} | {'' if isinstance(value, str) else cell(unit)} |"
 
 
 def key_rows(rows, keys: tuple[str, ...]) -> list:
