@@ -217,9 +217,9 @@ def test_save_and_open_confirm_beside_their_buttons(open_tab):
     page.get_by_text("RMS displacement, measured feedback").first.wait_for(timeout=60000)
     _open_folder(page, "Saved experiment")
     page.get_by_role("button", name="Save").click()
-    saved = page.get_by_text(re.compile(r"Saved as [A-Z]{2}-[A-Z0-9]{4}"))
+    saved = page.get_by_text(re.compile(r"Saved as [A-Z]{2}(-[A-Z0-9]{4}){3}"))   # KN-7Q3M-X9TA-HPRW
     saved.wait_for(timeout=30000)
-    code = re.search(r"[A-Z]{2}-[A-Z0-9]{4}", saved.inner_text()).group()
+    code = re.search(r"[A-Z]{2}(-[A-Z0-9]{4}){3}", saved.inner_text()).group()
     tab.switch_exercise(get("thrust_liftoff").title, timeout_ms=90000)
     _open_folder(page, "Saved experiment")
     page.get_by_text("Experiment code", exact=True).locator("xpath=ancestor::div[.//input][1]//input").first.fill(code)
