@@ -97,7 +97,7 @@ def _readable_charts(page, name: str) -> None:
 
 
 def _readout_table(page):
-    return page.locator("table").filter(has_text="quantity").first
+    return page.locator("table:visible").filter(has_text="quantity").first   # not one folded away
 
 
 def _scope_runs(page) -> bool:

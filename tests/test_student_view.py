@@ -156,7 +156,9 @@ def test_a_semicolon_recording_is_refused_naming_its_separator():
 
 # -- smaller items -----------------------------------------------------------------------------------
 def test_a_stop_message_is_not_prefixed_twice():
-    assert stopped("Stopped at t = 12.0 ms: the rotor touched down.").startswith("**Stopped at t = 12.0 ms")
+    assert stopped("Stopped at t = 12.0 ms: the rotor touched down.").startswith(
+        "**Stopped: at t = 12.0 ms, the rotor touched down.**")
+    assert stopped("Stopped: the ball fell.").startswith("**Stopped: the ball fell.**")
     assert stopped("Touchdown").startswith("**Stopped: Touchdown**")
 
 

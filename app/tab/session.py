@@ -405,8 +405,8 @@ class LabSession:
             named = str(error) if uploaded.name in str(error) else f"{uploaded.name}: {error}"
             self.upload_note.content = f"⚠️ Not loaded: {escaped(named)}"
             return
-        rows = f" ({len(data)} rows)" if hasattr(data, "__len__") else ""
-        self.upload_note.content = f"✓ Loaded {escaped(uploaded.name)}{rows}: the run starts again with it."
+        rows = f" {len(data)} rows;" if hasattr(data, "__len__") else ""
+        self.upload_note.content = f"✓ Loaded {escaped(uploaded.name)}.{rows} the run starts again with it."
         with lab.lock:
             lab.values["data"] = data
             lab.restart()
