@@ -1,6 +1,7 @@
 """Command line of the lab.
 
-    python -m app [--host H] [--port P] [--exercise NAME] [--data-dir DIR] [--token T | --token-file F]
+    python -m app [--host H] [--port P] [--exercise NAME] [--data-dir DIR | --database URL]
+                  [--token T | --token-file F]
                   [--max-tabs N] [--allow-origin URL ...] [--trusted-proxy A ...]
                                                start the browser lab (default; also ``serve``)
     python -m app serve --workers N [same options] [--worker-ports FIRST]   N lab processes behind HAProxy
@@ -8,7 +9,15 @@
     python -m app list [--json]                exercises and their parameters
     python -m app run NAME [--set N=V ...] [--duration S] [--seed N] [--data FILE] [--json]
     python -m app run --code KN-7Q3M-X9TA-HPRW [--set N=V ...] [--json]   a saved experiment, headless
+    python -m app run NAME --filter-history FROM:TO [--branch q_scale=10@SAMPLE] [--json]
+                                               the Kalman filter's history (and a branch), headless
     python -m app save NAME [--set N=V ...] [--data FILE]        save an experiment, print its code
+    python -m app assignment create --exercise NAME --vary N=LOW..HIGH ... [--lock N ...]
+                  --spec 'METRIC<=BOUND:POINTS' ... [--deadline T] [--counts best|last] [--json]
+    python -m app assignment variant CODE --student ID [--json]      a student's drawn parameters
+    python -m app assignment submit CODE --student ID [--set N=V ...] [--json]   graded headless
+    python -m app grades CODE [CODE ...] --csv [--lms canvas|moodle]  the gradebook for the LMS
+        (run, save, assignment and grades take --data-dir DIR or --database postgresql://...)
     python -m app bench [--json] [--browser]   throughput benchmark; --browser: slider-to-readout latency
     python -m app reproduce [--json] [--quick] [--html DIR] [--exercise NAME ...]
                                                every paper claim measured; exit 1 if one fails
@@ -29,6 +38,7 @@ from pathlib import Path
 
 from app.commands import headless
 from app.infra import access
+from app.infra.database import DATABASE_VARIABLE
 from lab_modules.parameters import ParameterError
 
 USAGE_ERROR = 2
@@ -46,12 +56,16 @@ def _serve_options(parser: argparse.ArgumentParser, defaults: bool) -> None:
                         help="exercise a new tab opens on (default kalman_noise; tabs can switch)")
     parser.add_argument("--data-dir", default=default(None), metavar="DIR",
                         help="where saved experiments live (default ~/.local/share/amb-lab)")
+    _database_option(parser, default(None))
     parser.add_argument("--token", default=default(None),
                         help="class token asked of every new tab when not on loopback (default: generated; "
                              "the process list shows it to every user: prefer --token-file or "
                              f"${access.TOKEN_VARIABLE})")
     parser.add_argument("--token-file", default=default(None), metavar="FILE",
                         help="read the class token from the first line of FILE")
+    parser.add_argument("--instructor-token-file", default=default(None), metavar="FILE",
+                        help="read the instructor page's token from the first line of FILE (default: "
+                             f"${access.INSTRUCTOR_TOKEN_VARIABLE}, else generated and printed at start)")
     parser.add_argument("--trusted-proxy", action="append", default=default([]), metavar="ADDRESS",
                         help="a proxy whose X-Forwarded-For names the student's address (repeatable; "
                              "loopback is always trusted), e.g. the balancer in front of several machines")
@@ -63,8 +77,60 @@ def _serve_options(parser: argparse.ArgumentParser, defaults: bool) -> None:
                              "e.g. https://lab.example.org behind a proxy")
 
 
+def _database_option(parser: argparse.ArgumentParser, default) -> None:
+    parser.add_argument("--database", default=default, metavar="URL",
+                        help="keep experiments, assignments and submissions in PostgreSQL, shared by every lab "
+                             "process on every machine: postgresql://USER:PASSWORD@HOST:PORT/DB (default: "
+                             f"${DATABASE_VARIABLE}, else SQLite in --data-dir)")
+
+
+def _store_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--data-dir", default=None, metavar="DIR", help="where saved experiments live")
+    _database_option(parser, None)
+    parser.add_argument("--json", action="store_true", help="print JSON")
+
+
+def _assignment_parsers(sub) -> None:
+    assignment = sub.add_parser("assignment", help="create an assignment, draw a student's variant, submit")
+    steps = assignment.add_subparsers(dest="step", required=True)
+    create = steps.add_parser("create", help="a new assignment: prints its code and student link")
+    create.add_argument("--exercise", required=True, help="the exercise (python -m app list)")
+    create.add_argument("--title", default=None, help="shown to students and in the gradebook")
+    create.add_argument("--vary", action="append", default=[], metavar="NAME=LOW..HIGH",
+                        help="a parameter drawn per student in [LOW, HIGH] (repeatable; locked for the student)")
+    create.add_argument("--lock", action="append", default=[], metavar="NAME",
+                        help="a parameter the student may not change (repeatable)")
+    create.add_argument("--spec", action="append", default=[], metavar="METRIC<=BOUND:POINTS",
+                        help="a metric to meet (<= or >=) and its points (repeatable; at least one)")
+    create.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                        help="a value every student starts from (repeatable)")
+    create.add_argument("--deadline", default=None, metavar="YYYY-MM-DDTHH:MM",
+                        help="no submissions after this (local time unless a zone is given)")
+    create.add_argument("--counts", default="best", help="which submission counts: best (default) or last")
+    create.add_argument("--duration", default=None, type=float, metavar="S",
+                        help="simulated seconds each submission is graded on (default: the exercise's)")
+    create.add_argument("--url", default="http://127.0.0.1:8080", metavar="URL",
+                        help="the lab's address, for the student link (default http://127.0.0.1:8080)")
+    variant = steps.add_parser("variant", help="a student's drawn parameters")
+    submit = steps.add_parser("submit", help="grade a student's settings (recomputed headless) and keep them")
+    for parser in (variant, submit):
+        parser.add_argument("code", help="the assignment's code")
+        parser.add_argument("--student", required=True, help="the student's name or id")
+    submit.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                        help="a setting of the student's design (repeatable)")
+    for parser in (create, variant, submit):
+        _store_options(parser)
+    grades = sub.add_parser("grades", help="the gradebook of one or more assignments, for the LMS")
+    grades.add_argument("codes", nargs="+", metavar="CODE", help="assignment code(s): one column each")
+    grades.add_argument("--csv", action="store_true", help="CSV as the LMS imports it (default: tab-separated)")
+    grades.add_argument("--lms", default="canvas", choices=("canvas", "moodle"),
+                        help="column layout: canvas (default) or moodle")
+    _store_options(grades)
+
+
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="python -m app", description="AMB estimation lab")
+    # no abbreviations: the main parser would read a subcommand's --data as an ambiguous --data-dir/--database
+    parser = argparse.ArgumentParser(prog="python -m app", description="AMB estimation lab", allow_abbrev=False)
     _serve_options(parser, defaults=True)
     sub = parser.add_subparsers(dest="command")
     serve = sub.add_parser("serve", help="start the browser lab (the default); --workers N: N processes "
@@ -88,6 +154,7 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("exercise", nargs="?", help="exercise name (or --code)")
     run.add_argument("--code", default=None, help="run a saved experiment (e.g. KN-7Q3M-X9TA-HPRW)")
     run.add_argument("--data-dir", default=None, metavar="DIR", help="where saved experiments live")
+    _database_option(run, None)
     run.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                      help="override a parameter (repeatable)")
     run.add_argument("--duration", default=None, help="simulated seconds (default: the exercise's)")
@@ -95,12 +162,20 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--data", default=None, metavar="FILE",
                      help="data file for exercises that take one (e.g. a recording CSV)")
     run.add_argument("--json", action="store_true", help="print JSON")
+    run.add_argument("--filter-history", default=None, metavar="FROM:TO",
+                     help="instead of the metrics: the Kalman filter at samples FROM ... TO-1 (priors, gains, "
+                          "innovations, posteriors, true state, measurement; NEES/NIS with 95%% bounds)")
+    run.add_argument("--branch", default=None, metavar="SETTINGS@SAMPLE",
+                     help="with --filter-history: the filter rerun from SAMPLE (or t=SECONDS) with Q, R scaled "
+                          "on the same measurements, e.g. q_scale=10@2050 or q_scale=10,r_scale=0.5@t=0.1")
     save = sub.add_parser("save", help="save an experiment (e.g. an instructor's preset) and print its code")
     save.add_argument("exercise")
     save.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                       help="a parameter value (repeatable; the rest keep their defaults)")
     save.add_argument("--data", default=None, metavar="FILE", help="a recording for exercises that take one")
     save.add_argument("--data-dir", default=None, metavar="DIR", help="where saved experiments live")
+    _database_option(save, None)
+    _assignment_parsers(sub)
     bench = sub.add_parser("bench", help="closed-loop throughput benchmark")
     bench.add_argument("--json", action="store_true", help="print JSON")
     bench.add_argument("--seconds", default="2.0", help="simulated seconds per measurement (0.1 ... 60)")
@@ -151,6 +226,10 @@ def main(argv: list[str] | None = None) -> int:
             return reproduce_main(args.json, args.quick, args.html, args.only)
         if args.command == "save":
             return headless.command_save(args)
+        if args.command in ("assignment", "grades"):
+            from app.commands import assignments
+            command = args.command if args.command == "grades" else args.step
+            return getattr(assignments, f"command_{command}")(args)
         if args.command == "bench" and args.browser:
             from app.commands.browser_bench import main as browser_bench_main
             with tempfile.TemporaryDirectory() as scratch:

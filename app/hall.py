@@ -34,7 +34,8 @@ import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
 
-from app.infra.access import TOKEN_VARIABLE, check_bindable, is_address
+from app.infra.access import INSTRUCTOR_TOKEN_VARIABLE, TOKEN_VARIABLE, check_bindable, is_address
+from app.infra.database import DATABASE_VARIABLE, open_store
 from lab_modules.parameters import ParameterError
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -190,6 +191,9 @@ def worker_environment(settings) -> dict[str, str]:
     environment = {name: value for name, value in os.environ.items() if name != TOKEN_VARIABLE}
     if settings.token is not None:
         environment[TOKEN_VARIABLE] = settings.token
+    environment[INSTRUCTOR_TOKEN_VARIABLE] = settings.instructor_token   # one instructor token for the hall
+    if settings.database is not None:                 # one PostgreSQL database for all (its URL may hold a password)
+        environment[DATABASE_VARIABLE] = settings.database
     return environment
 
 
@@ -228,7 +232,7 @@ def _raise_stop(signum, _frame) -> None:
 def serve_hall(settings, workers: int, first_worker_port: int | None, allow_origins: list[str]) -> int:
     """Serve the lab (``settings``: ``app.server.Settings``) with ``workers`` processes behind
     HAProxy until Ctrl-C or SIGTERM."""
-    from app.infra.store import Store, StoreError
+    from app.infra.store import StoreError
     from app.server import shown_url
     haproxy = shutil.which("haproxy")
     if haproxy is None:
@@ -248,7 +252,7 @@ def serve_hall(settings, workers: int, first_worker_port: int | None, allow_orig
         raise ParameterError(f"worker port(s) {', '.join(map(str, busy))} already in use: choose others "
                              "with --worker-ports FIRST")
     try:
-        Store(settings.data_dir).close()      # create the shared database once, before the workers race
+        open_store(settings.database, settings.data_dir).close()   # create (or migrate) it once, before the workers race
     except StoreError as error:
         raise ParameterError(str(error)) from None
     pool = [Worker(k + 1, p, worker_command(p, settings, allow_origins), worker_environment(settings))
@@ -278,7 +282,7 @@ def serve_hall(settings, workers: int, first_worker_port: int | None, allow_orig
                 return 1
             print(f"AMB estimation lab: open {shown_url(host, port)} in a browser "
                   f"({workers} lab processes behind HAProxy; Ctrl+C to stop)", flush=True)
-            for line in settings.token_lines():
+            for line in [*settings.token_lines(), settings.instructor_line()]:
                 print(line, flush=True)
             while True:
                 time.sleep(POLL_S)

@@ -23,7 +23,8 @@ from pathlib import Path
 import viser
 
 from app.infra import access, traffic
-from app.infra.store import Store, StoreError
+from app.infra.database import chosen_database, open_store
+from app.infra.store import StoreError
 from app.tab.session import LabSession
 from lab_modules.exercises import get
 from lab_modules.parameters import ParameterError
@@ -42,8 +43,11 @@ class Settings:
     port: int = 8080
     exercise: str = "kalman_noise"
     data_dir: Path | None = None
+    database: str | None = None            # PostgreSQL URL (None: SQLite in data_dir)
     token: str | None = None               # None: no token asked (loopback only)
     token_source: str = ""                 # "generated", "from --token", ...
+    instructor_token: str = field(default_factory=access.new_token)   # the instructor page's (?instructor)
+    instructor_source: str = "generated"
     origins: access.OriginPolicy = field(default_factory=access.OriginPolicy)
     max_tabs: int = access.TABS_PER_PROCESS
     trusted_proxies: frozenset[str] = frozenset()
@@ -53,14 +57,30 @@ class Settings:
         host = access.check_host(args.host)
         port = access.check_port(args.port)
         get(args.exercise)
+        try:
+            database = chosen_database(args.database, os.environ)
+        except StoreError as error:
+            raise ParameterError(str(error)) from None
         token, source = access.chosen_token(args.token, args.token_file, os.environ)
         if token is None and not access.is_loopback(host):
             token, source = access.new_token(), "generated"
+        instructor, instructor_source = access.chosen_token(None, args.instructor_token_file, os.environ,
+                                                            access.INSTRUCTOR_TOKEN_VARIABLE, "--instructor-token")
+        if instructor is None:
+            instructor, instructor_source = access.new_token(), "generated"
+        if token is not None and access.token_matches(token, instructor):
+            raise ParameterError("the instructor token must differ from the class token: students know that one")
         return cls(host=host, port=port, exercise=args.exercise,
-                   data_dir=Path(args.data_dir) if args.data_dir else None, token=token,
-                   token_source=source, origins=access.OriginPolicy(args.allow_origin or (), host),
+                   data_dir=Path(args.data_dir) if args.data_dir else None, database=database, token=token,
+                   token_source=source, instructor_token=instructor, instructor_source=instructor_source,
+                   origins=access.OriginPolicy(args.allow_origin or (), host),
                    max_tabs=access.check_max_tabs(args.max_tabs),
                    trusted_proxies=frozenset(access.check_host(a) for a in args.trusted_proxy or ()))
+
+    def instructor_line(self) -> str:
+        """What the server prints about the instructor token at start."""
+        return (f"Instructor token: {self.instructor_token} ({self.instructor_source}); the instructor page of an "
+                "assignment: the lab's address with ?instructor=CODE")
 
     def token_lines(self) -> list[str]:
         """What the server prints about the class token at start (a weak chosen one is warned of)."""
@@ -137,7 +157,7 @@ def serve(settings: Settings) -> int:
     starting on ``settings.exercise`` (each tab can switch).  Returns the exit status."""
     try:
         access.check_bindable(settings.host, settings.port)
-        store = Store(settings.data_dir, log_failures=True)
+        store = open_store(settings.database, settings.data_dir, log_failures=True)
     except (ParameterError, StoreError) as error:
         print(f"error: {error}", file=sys.stderr)
         return USAGE_ERROR
@@ -187,7 +207,7 @@ def serve(settings: Settings) -> int:
         address = access.client_address(policy.peer(client.client_id), forwarded, settings.trusted_proxies)
         session = LabSession(client, chosen, store, settings.token,
                              on_refused=lambda reason: policy.close(client.client_id, reason), limits=limits,
-                             address=address)
+                             address=address, instructor_token=settings.instructor_token)
         with lock:
             sessions[client.client_id] = session
 
@@ -206,9 +226,9 @@ def serve(settings: Settings) -> int:
 
     url = shown_url(settings.host, server.get_port())
     print(f"AMB estimation lab: open {url} in a browser (Ctrl+C to stop)", flush=True)
-    for line in settings.token_lines():
+    for line in [*settings.token_lines(), settings.instructor_line()]:
         print(line, flush=True)
-    print(f"Saved experiments: {store.path}; at most {settings.max_tabs} tabs (--max-tabs)", flush=True)
+    print(f"Saved experiments: {store.where}; at most {settings.max_tabs} tabs (--max-tabs)", flush=True)
     try:
         while True:
             time.sleep(RETURN_MEMORY_EVERY_S)

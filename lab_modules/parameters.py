@@ -22,7 +22,7 @@ class ParameterError(ValueError):
 #: unit is here, already SI or without a unit (``si_factor``; tested for every exercise).
 SI_FACTORS = {
     "µs": 1e-6, "ms": 1e-3,
-    "µm": 1e-6, "mm": 1e-3,
+    "µm": 1e-6, "mm": 1e-3, "cm²": 1e-4,
     "mA": 1e-3, "mV": 1e-3,
     "%": 1e-2,
     "A/mm": 1e3, "A/(mm·s)": 1e3, "A·s/mm": 1e3,

@@ -87,6 +87,43 @@ def open_tab(browser, lab_url):
         tab.page.close()
 
 
+# -- the store's two back ends ------------------------------------------------------------------
+@pytest.fixture(scope="session")
+def postgres_server():
+    """A throwaway PostgreSQL server for the session (skipped only when PostgreSQL is not installed)."""
+    from tests.postgres_server import PostgresServer, binaries
+    bin_dir = binaries()
+    if bin_dir is None:
+        pytest.skip("PostgreSQL is not installed (no initdb/pg_ctl on PATH, $PG_BIN or /usr/lib/postgresql/*/bin)")
+    pytest.importorskip("psycopg", reason="psycopg 3 is not installed (the test extras)")
+    server = PostgresServer(bin_dir).start()
+    yield server
+    server.stop()
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def database(request, tmp_path):
+    """Where a test's store lives, once per back end: (--data-dir, --database) for ``open_store``."""
+    if request.param == "sqlite":
+        return tmp_path, None
+    return None, request.getfixturevalue("postgres_server").new_database()
+
+
+@pytest.fixture
+def open_test_store(database):
+    """Opens the test's store (on either back end); every store it opened is closed afterwards."""
+    from app.infra.database import open_store
+    opened = []
+
+    def opener(**options):
+        store = open_store(database[1], database[0], **options)
+        opened.append(store)
+        return store
+    yield opener
+    for store in opened:
+        store.close()
+
+
 def pytest_unconfigure(config):
     """The run's last line, after pytest's own summary: what was skipped for a missing program and
     how to install it (``tests/skipped.py``)."""

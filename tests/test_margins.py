@@ -101,6 +101,7 @@ VARIANTS = {
     "adaptive_filter": [{}, {"feedback": "measured"}, {"feedback": "ekf"}],
     "stiffness_map": [{}],
     "rotor_at_speed": [{}, {"feedback": "estimated"}, {"sensor_offset_mm": 60.0}],
+    "self_sensing": [{"feedback": "self-sensing estimate ŝ", "trajectory": "fixed at gap 1"}],
 }
 CASES = [(name, settings) for name, variants in VARIANTS.items() for settings in variants]
 

@@ -14,6 +14,8 @@ import pytest
 from scipy import stats
 
 from lab_modules.estimators.ripple_inductance import fit, predicted_sigma_inductance_h, weights
+from lab_modules.exercises._self_sensing_geometry import analysis as geometry_analysis
+from lab_modules.exercises._self_sensing_geometry import straight_ramp_sigma_gap_m
 from lab_modules.exercises.self_sensing import (
     EXERCISE,
     QUIET,
@@ -227,3 +229,47 @@ def test_headless_run_json_has_the_metrics():
         assert key in metrics
     assert set(metrics["predicted_sigma_half_period_uh"]["gap_1"]) == {"phase_1", "phase_2"}
     assert metrics["realtime_factor"] > 0
+
+
+# -- geometry, Fig. 2's gains, eq. 25 during the moves ------------------------------------------------
+def test_geometry_controls_default_to_the_lab_rig_and_reach_the_loop():
+    assert setup(EXERCISE.resolve({})).rig == RIG
+    s = setup(EXERCISE.resolve({"turns": 900, "gap_area_cm2": 0.35, "leakage_reluctance": 6e7}))
+    assert (s.rig.turns, s.rig.gap_area_m2, s.rig.leakage_reluctance_per_h) == (900, pytest.approx(35e-6), 6e7)
+    rows = SelfSensingSimulation(EXERCISE.resolve({**QUIET, "turns": 900})).advance(5)
+    assert rows[-1, 1 + COLUMN["inductance_true_h"]] == pytest.approx(float(RIG.inductance_h(4e-3)) * 1.5**2,
+                                                                       rel=1e-3)     # L = N²/R (eq. 2)
+
+
+def test_straight_ramp_sigma_follows_the_simulation_across_geometries():
+    for change in ({}, {"turns": 450}, {"leakage_reluctance": 3e7}):
+        values = EXERCISE.resolve(change)
+        s = setup(values)
+        simulated = statistics(stationary(values, "gap_1", periods=1500))["predicted_sigma_position_um"]
+        assert simulated == pytest.approx(straight_ramp_sigma_gap_m(s.rig, s.gap_1_m, s) * 1e6, rel=0.03)
+
+
+def test_trade_off_plots_show_slower_coil_with_turns_and_less_spread_with_less_leakage():
+    plots = {p.title.split(":")[1].strip()[:6]: p for p in geometry_analysis(setup(EXERCISE.resolve({})))[2]}
+    sigma = {label.split(" ")[0]: y for label, y, _ in plots["σ(ŝ) w"].series}
+    tau = {label.split(" ")[0]: y for label, y, _ in plots["coil t"].series}
+    assert np.all(np.diff(tau["N"]) > 0) and np.all(np.diff(sigma["N"]) > 0)      # L ∝ N², σ(ŝ) ∝ N²
+    assert np.all(np.diff(sigma["R_l"]) < 0) and np.all(np.diff(tau["R_l"]) < 0)  # leakage costs both
+
+
+def test_scope_gains_read_mu_and_one_over_eta_as_fig_2():
+    for change, mu_hat in (({"current_gain": 1.05}, 1.05), ({"voltage_gain": 1.05}, 1 / 1.05)):
+        values = EXERCISE.resolve({**QUIET, **change})
+        rows = SelfSensingSimulation(values).advance(30)
+        columns = ("t",) + SelfSensingSimulation.columns
+        ratio = rows[5:, columns.index("inductance_ratio")]
+        assert np.mean(ratio) == pytest.approx(mu_hat, abs=2e-4)
+        assert np.mean(rows[5:, columns.index("voltage_gain_estimate")]) == pytest.approx(1 / mu_hat, abs=2e-4)
+        assert rows[-1, columns.index("gain_ratio_set")] == pytest.approx(mu_hat)
+
+
+def test_offset_shift_during_moves_follows_eq_25_and_vanishes_without_offset():
+    metrics = EXERCISE.metrics(EXERCISE.resolve({**QUIET, "voltage_offset_v": 0.57}), 1.3)["trajectory"]["offset"]
+    assert metrics["shift_to_eq25"] == pytest.approx(1.0, abs=0.05)
+    assert metrics["shift_max_uh"] > metrics["shift_at_rest_max_uh"]          # the moves make īᴵᴵ ≠ īᴵ
+    assert "offset" not in EXERCISE.metrics(EXERCISE.resolve(QUIET), 0.3)["trajectory"]

@@ -21,20 +21,32 @@ from app.infra.store import CODE_ALPHABET, Store, StoreError, StoreUnavailable, 
 from lab_modules.parameters import ParameterError
 
 
-def test_save_and_load_round_trip(tmp_path):
-    store = Store(tmp_path)
+def table_count(database, table: str) -> int:
+    """Rows of ``table``, read through a connection of its own (either back end)."""
+    data_dir, url = database
+    if url is None:
+        with sqlite3.connect(data_dir / "lab.sqlite3") as db:
+            return db.execute(f"SELECT COUNT(*) FROM {table}").fetchone()[0]
+    import psycopg
+    with psycopg.connect(url) as db:
+        return db.execute(f"SELECT COUNT(*) FROM {table}").fetchone()[0]
+
+
+def test_save_and_load_round_trip(open_test_store, database):
+    store = open_test_store()
     code = store.save("kalman_noise", {"gain_factor": 1.5, "feedback": "estimated"}, "run.csv", b"t,x\n1,2\n")
     assert re.fullmatch(rf"KN-[{CODE_ALPHABET}]{{4}}-[{CODE_ALPHABET}]{{4}}-[{CODE_ALPHABET}]{{4}}", code)
-    loaded = Store(tmp_path).load(code.lower().replace("-", " "))      # another connection, typed loosely
+    loaded = open_test_store().load(code.lower().replace("-", " "))      # another connection, typed loosely
     assert (loaded.exercise, loaded.kind) == ("kalman_noise", "saved")
     assert loaded.parameters == {"gain_factor": 1.5, "feedback": "estimated"}
     assert (loaded.recording_name, loaded.recording) == ("run.csv", b"t,x\n1,2\n")
     assert store.check() == "ok"
-    assert sqlite3.connect(store.path).execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+    if database[1] is None:
+        assert sqlite3.connect(store.path).execute("PRAGMA journal_mode").fetchone()[0] == "wal"
 
 
-def test_autosave_overwrites_only_its_slot(tmp_path):
-    store = Store(tmp_path)
+def test_autosave_overwrites_only_its_slot(open_test_store, database):
+    store = open_test_store()
     slot = store.new_autosave("maglev_tuning", {"seed": 1})
     saved = store.save("maglev_tuning", {"seed": 1})
     store.autosave(slot, "kalman_noise", {"seed": 2}, "a.csv", b"abc")
@@ -43,11 +55,11 @@ def test_autosave_overwrites_only_its_slot(tmp_path):
         store.autosave(saved, "kalman_noise", {"seed": 3})
     assert store.load(saved).parameters == {"seed": 1}
     store.autosave(slot, "kalman_noise", {"seed": 2}, "a.csv", b"abc")   # same recording stored once
-    assert sqlite3.connect(store.path).execute("SELECT COUNT(*) FROM recordings").fetchone()[0] == 1
+    assert table_count(database, "recordings") == 1
 
 
-def test_codes_are_checked(tmp_path):
-    store = Store(tmp_path)
+def test_codes_are_checked(open_test_store):
+    store = open_test_store()
     for bad in ("", "KN", "KN-0000", "K1-ABCD", "KN-ABCDE", "<b>x</b>", "KN-ABCD-EFGH", "ΚΝ-ABCD"):
         with pytest.raises(StoreError, match="not an experiment code"):
             normalise_code(bad)
@@ -60,8 +72,8 @@ def test_codes_are_checked(tmp_path):
     assert code_prefix("lqg_vs_pid") == "LP" and code_prefix("kalman_noise") == "KN"
 
 
-def test_concurrent_writers_get_distinct_codes(tmp_path):
-    stores = [Store(tmp_path) for _ in range(4)]
+def test_concurrent_writers_get_distinct_codes(open_test_store):
+    stores = [open_test_store() for _ in range(4)]
     codes: list[str] = []
 
     def writer(store):
@@ -275,7 +287,8 @@ def test_a_token_is_generated_off_loopback_and_a_weak_one_is_warned_of(monkeypat
     from app.server import Settings
     monkeypatch.delenv(TOKEN_VARIABLE, raising=False)
     args = argparse.Namespace(host=host, port=8080, exercise="kalman_noise", data_dir=None, token=given,
-                              token_file=None, allow_origin=[], max_tabs="60", trusted_proxy=[])
+                              token_file=None, allow_origin=[], max_tabs="60", trusted_proxy=[], database=None,
+                              instructor_token_file=None)
     settings = Settings.from_args(args)
     assert settings.token_source == (expected or "")
     lines = " ".join(settings.token_lines())

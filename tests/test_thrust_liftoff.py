@@ -17,6 +17,7 @@ import scipy.linalg
 from filterpy.kalman import KalmanFilter as FilterpyKalmanFilter
 
 from lab_modules.estimators.thrust_kalman import PAPER_Q_N2, ThrustFilterDesign, process_noise_from_p0
+from lab_modules.exercises._thrust_liftoff_labels import liftoff_gap_evidence, median_standard_error
 from lab_modules.exercises.thrust_liftoff import EXERCISE, setup
 from lab_modules.loops.thrust_liftoff_loop import (
     NO_LIFTOFF,
@@ -255,3 +256,27 @@ def test_cli_bad_input_exits_2_with_one_line(setting, token):
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and setting.split("=")[0] in lines[0] and token in lines[0], result.stderr
     assert result.stdout == ""
+
+
+# -- honest labels: the lift-off gap's cause, a median's standard error -------------------------------
+def test_the_stop_not_the_taylor_model_separates_the_noise_free_liftoffs():
+    gap = liftoff_gap_evidence(setup(EXERCISE.resolve({})), 0.6)
+    assert gap["exact_filter_on_stop_um"] == pytest.approx(gap["taylor_filter_on_stop_um"], rel=0.01)
+    assert gap["taylor_filter_on_stop_um"] > 100 * gap["taylor_filter_off_stop_um"]
+    assert gap["exact_filter_off_stop_um"] < 1e-6
+
+
+def test_filter_model_control_gives_the_exact_matrices():
+    design = setup(EXERCISE.resolve({"filter_model": "exact ZOH"})).design
+    Phi, B_d, _ = design.matrices
+    Phi_e, B_e, _ = design.bearing.exact_discretisation()
+    assert np.array_equal(Phi, Phi_e) and np.array_equal(B_d, B_e)
+    assert not np.array_equal(setup(EXERCISE.resolve({})).design.matrices[0], Phi_e)
+
+
+def test_median_standard_error_matches_the_spread_of_medians():
+    rng = np.random.default_rng(3)
+    medians = np.median(rng.normal(60.0, 10.0, (4000, 40)), axis=1)
+    sample = rng.normal(60.0, 10.0, 40)
+    assert median_standard_error(sample) == pytest.approx(np.std(medians), rel=0.25)
+    assert np.isnan(median_standard_error([1.0]))

@@ -38,8 +38,10 @@ def local_storage_answer(request: dict, value: str | None = None) -> dict:
 class RawTab:
     """One tab over a raw websocket."""
 
-    def __init__(self):
-        self.elements: dict[str, dict] = {}      # uuid -> {"type", "label", "content"}
+    def __init__(self, keep_messages: bool = False):
+        """``keep_messages``: keep every message the server sent, in ``messages`` (short tests only)."""
+        self.elements: dict[str, dict] = {}      # uuid -> {"type", "label", "props", "content"}
+        self.messages: list[dict] | None = [] if keep_messages else None
         self.updates: list[tuple[float, str, dict]] = []   # (perf_counter, uuid, updates)
         self.websocket = None
         self.reader: asyncio.Task | None = None
@@ -75,6 +77,8 @@ class RawTab:
     def _take(self, now: float, message: dict) -> None:
         kind = message.get("type", "")
         uuid = message.get("uuid")
+        if self.messages is not None:
+            self.messages.append(message)
         if kind == "LocalStorageGetItemRequestMessage":   # answered like a browser with nothing stored
             asyncio.get_running_loop().create_task(self.send(local_storage_answer(message)))
         if kind == "GuiUpdateMessage":
@@ -87,7 +91,7 @@ class RawTab:
             self.elements.pop(uuid, None)
         elif kind.startswith("Gui") and isinstance(uuid, str) and isinstance(message.get("props"), dict):
             props = message["props"]
-            self.elements[uuid] = {"type": kind, "label": props.get("label") or props.get("title"),
+            self.elements[uuid] = {"type": kind, "label": props.get("label") or props.get("title"), "props": props,
                                    "content": props.get("_markdown", props.get("content")), "value": message.get("value")}
 
     def find(self, kind: str, label: str | None = None, content: str | None = None) -> str | None:

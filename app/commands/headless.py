@@ -13,6 +13,7 @@ import stat
 import sys
 from pathlib import Path
 
+from app.infra.database import chosen_database, open_store
 from app.infra.store import Store, StoreError
 from lab_modules.exercises import get, registry
 from lab_modules.parameters import ParameterError
@@ -119,9 +120,10 @@ def read_data_file(exercise, path) -> tuple[str, bytes] | None:
     return Path(path).name, content
 
 
-def _store(data_dir) -> Store:
+def open_store_of(args) -> Store:
+    """The store of a headless command's ``--database`` or ``--data-dir``; ``ParameterError`` (exit 2)."""
     try:
-        return Store(data_dir)
+        return open_store(chosen_database(args.database, os.environ), args.data_dir)
     except StoreError as error:
         raise ParameterError(str(error)) from None
 
@@ -150,7 +152,7 @@ def command_run(args) -> int:
     saved = None
     if args.code is not None:
         try:
-            saved = _store(args.data_dir).load(args.code)
+            saved = open_store_of(args).load(args.code)
         except StoreError as error:
             raise ParameterError(str(error)) from None
         if args.exercise is not None and args.exercise != saved.exercise:
@@ -168,6 +170,8 @@ def command_run(args) -> int:
     shown = {name: value for name, value in values.items() if name != "data"}
     if data_file is not None:
         shown["data"] = args.data or data_file[0]
+    if args.filter_history is not None or args.branch is not None:
+        return filter_history(args, exercise, values, shown)
     result = {"exercise": exercise.name, "parameters": shown,
               "model": exercise.model(values), "metrics": exercise.metrics(values, duration)}
     if saved is not None:
@@ -185,6 +189,17 @@ def command_run(args) -> int:
     return 0
 
 
+def filter_history(args, exercise, values: dict, shown: dict) -> int:
+    """``run --filter-history FROM:TO [--branch ...]``: the filter's history instead of the metrics."""
+    from app.commands import filter_debug
+    if args.filter_history is None:
+        raise ParameterError("--branch needs --filter-history FROM:TO (the samples the branch is printed for)")
+    result = {"exercise": exercise.name, "parameters": shown,
+              **filter_debug.report(exercise, values, args.filter_history, args.branch)}
+    print(filter_debug.dumps(result, jsonable) if args.json else filter_debug.text(result))
+    return 0
+
+
 def command_save(args) -> int:
     exercise = get(args.exercise)
     overrides = overrides_from(args.set, None, exercise)
@@ -192,7 +207,7 @@ def command_save(args) -> int:
     values = exercise.resolve({**overrides, "data": exercise.load_data(*data_file) if data_file else None})
     name, content = data_file or (None, None)
     try:
-        code = _store(args.data_dir).save(exercise.name, values, name, content)
+        code = open_store_of(args).save(exercise.name, values, name, content)
     except StoreError as error:
         raise ParameterError(str(error)) from None
     print(code)

@@ -50,6 +50,7 @@ from lab_modules.parameters import ParameterError
 TOKEN_ALPHABET = "abcdefghjkmnpqrstuvwxyz23456789"
 TOKEN_GROUPS = 3                  # of four characters: 12 × log2(31) = 59 bits
 TOKEN_VARIABLE = "AMB_LAB_TOKEN"
+INSTRUCTOR_TOKEN_VARIABLE = "AMB_LAB_INSTRUCTOR_TOKEN"   # the instructor page's token (never the class's)
 #: A chosen token weaker than this is worth a warning at start [bits].
 STRONG_TOKEN_BITS = 50
 RESOLVE_TIMEOUT_S = 3.0
@@ -165,21 +166,23 @@ def check_token(text, source: str = "--token") -> str:
     return token
 
 
-def chosen_token(given: str | None, file: str | None, environment: dict) -> tuple[str | None, str]:
+def chosen_token(given: str | None, file: str | None, environment: dict, variable: str = TOKEN_VARIABLE,
+                 option: str = "--token") -> tuple[str | None, str]:
     """The class token from ``--token``, ``--token-file`` (its first line) or ``TOKEN_VARIABLE``, in
-    that order, and where it came from; (None, "") if none is given."""
+    that order, and where it came from; (None, "") if none is given.  The instructor token the same
+    way from ``--instructor-token``, ``--instructor-token-file`` or ``INSTRUCTOR_TOKEN_VARIABLE``."""
     if given is not None:
-        return check_token(given), "from --token"
+        return check_token(given, option), f"from {option}"
     if file is not None:
         try:
             with open(file, encoding="utf-8") as handle:
                 first = handle.readline(1000)
         except (OSError, UnicodeDecodeError) as error:
             reason = error.strerror if isinstance(error, OSError) else "not a text file"
-            raise ParameterError(f"--token-file {file!r}: {reason}") from None
-        return check_token(first, "--token-file"), "from --token-file"
-    if environment.get(TOKEN_VARIABLE):
-        return check_token(environment[TOKEN_VARIABLE], TOKEN_VARIABLE), f"from {TOKEN_VARIABLE}"
+            raise ParameterError(f"{option}-file {file!r}: {reason}") from None
+        return check_token(first, f"{option}-file"), f"from {option}-file"
+    if environment.get(variable):
+        return check_token(environment[variable], variable), f"from {variable}"
     return None, ""
 
 

@@ -111,7 +111,7 @@ class Traffic:
     # -- GUI updates --------------------------------------------------------------------
     def refused_update(self, client_id: int | None, message) -> str | None:
         """Why a tab's GUI update is refused (None: pass it on): only a control's value, and for a
-        dropdown one of its options."""
+        dropdown one of its options; never of a disabled control (e.g. a parameter an assignment fixes)."""
         if not isinstance(message.updates, dict):
             return "malformed GUI update"
         if set(message.updates) != {"value"}:
@@ -119,6 +119,8 @@ class Traffic:
         handle = viser_internals.gui_input_handle(self.server, client_id, message.uuid)
         if isinstance(handle, viser.GuiDropdownHandle) and message.updates["value"] not in handle.options:
             return "a choice the control does not offer"
+        if getattr(handle, "disabled", False):
+            return "a change of a control that is fixed"
         return None
 
     # -- uploads ----------------------------------------------------------------------

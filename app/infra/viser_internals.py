@@ -24,3 +24,8 @@ def forget_upload(server, client_id: int | None, transfer: str) -> None:
     for gui in (server.gui, getattr(client, "gui", None)):
         if gui is not None:
             gui._current_file_upload_states.pop(transfer, None)
+
+
+def element_id(handle) -> str:
+    """The id viser gives a GUI element: its page-side ``<label for=...>`` carries it."""
+    return handle._impl.uuid

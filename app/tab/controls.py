@@ -169,6 +169,14 @@ class Controls:
         if not parameter.choices:
             self.put_slider(parameter, in_use)
 
+    def follow(self, exercise: Exercise, values: dict) -> None:
+        """Set ``values`` (name -> value) as if their controls had moved there; the controls show them."""
+        for parameter in exercise.parameters:
+            if parameter.name in values:
+                value = values[parameter.name]
+                self.moved(parameter, float(np.log10(value)) if parameter.log else value)
+                self.put_slider(parameter, value)
+
     def put_slider(self, parameter: Parameter, value) -> None:
         """Move ``parameter``'s slider (if it has one) to ``value``; its echo changes nothing."""
         handle = self.inputs.get(parameter.name)

@@ -35,10 +35,11 @@ import viser
 from app.infra import layout
 from app.infra.access import Limits
 from app.infra.store import Store
-from app.panels import entry, page, scope, worksheets
+from app.panels import entry, filter_branch, page, page_query, scope, worksheets
 from app.panels.actions import ActionPanel
 from app.panels.docks import Docks
 from app.panels.export import ExportButtons
+from app.panels.filter_debugger import FilterDebugger
 from app.panels.inspector import FilterInspector
 from app.panels.live import LivePlots
 from app.panels.plots import plot_chart
@@ -47,8 +48,10 @@ from app.panels.scope_charts import TIME_AXES, ScopeCharts
 from app.panels.status import PAUSED, RUNNING, SimulationStatus, stopped
 from app.panels.text import escaped
 from app.tab.analysis_view import AnalysisView
+from app.tab.assignment import AssignmentTab
 from app.tab.controls import Controls
 from app.tab.gate import TokenGate
+from app.tab.instructor import InstructorTab
 from app.tab.saved import SavedExperiments
 from app.tab.state import LabState
 from app.tab.streaming import Problems, Stream
@@ -70,9 +73,10 @@ class LabSession:
 
     def __init__(self, client: viser.ClientHandle, exercise: Exercise, store: Store | None = None,
                  token: str | None = None, on_refused: Callable[[str], None] | None = None,
-                 limits: Limits | None = None, address: str = "unknown"):
+                 limits: Limits | None = None, address: str = "unknown", instructor_token: str | None = None):
         """Cheap: the lab is built on the tab's worker thread (after the class token, if one is set,
-        and once ``limits.admission`` has a place for it); ``address``: where the tab comes from."""
+        and once ``limits.admission`` has a place for it); ``address``: where the tab comes from;
+        ``instructor_token`` opens the instructor page of an assignment (``?instructor=CODE``)."""
         self.client = client
         self.exercises = registry()
         self.token = token
@@ -87,6 +91,10 @@ class LabSession:
         self.saved = SavedExperiments(store, client, self.gui_lock, self.state.snapshot, self.worker,
                                       self._show_error, limits.code_tries if limits is not None else None, address)
         self.controls = Controls(self.worker, self.state, self.gui_lock, self._apply)
+        self.assignment = AssignmentTab(store, client, self.gui_lock, self.worker, self.state, self._switch,
+                                        limits.code_tries if limits is not None else None, address)
+        self.instructor = InstructorTab(store, client, self.gui_lock, self.worker, instructor_token, self._leave_lab,
+                                        self.on_refused, limits.token_tries if limits is not None else None, address)
         self.worker.before_event = self.controls.flush_typing
         self.analysis = AnalysisView(client, self.gui_lock, self.state, self.worker, self._current)
         self.docks = Docks()
@@ -97,6 +105,7 @@ class LabSession:
         self.scene = None                         # the exercise's 3D view (None: it has none)
         self.stream: Stream | None = None
         self.inspector: FilterInspector | None = None
+        self.debugger: FilterDebugger | None = None
         self.download_note = None                 # what the exercise's download button did
         self.upload_note = None                   # what its upload button did
         self.time_axis = TIME_AXES[0]             # the scope's time axis, the student's choice for every exercise
@@ -170,6 +179,7 @@ class LabSession:
         """Start the experiment this browser autosaved last (a reloaded tab gets its work back),
         else ``exercise`` on its defaults (call holding ``gui_lock``), once the lab has a place."""
         self._wait_for_a_place()
+        page_query.add(self.client.gui, self._on_query, self.worker.on)   # the link's ?assignment=CODE
         saved = self.saved.browser_autosave(self.exercises)
         if saved is not None:
             recording = (saved.recording_name, saved.recording) if saved.recording is not None else None
@@ -207,6 +217,25 @@ class LabSession:
     def _switch(self, exercise: Exercise, overrides: dict | None = None,
                 recording: tuple[str, bytes] | None = None) -> None:
         """Replace the tab's lab (on the worker, so switches never overlap)."""
+        self._stop_lab()
+        with self.gui_lock:
+            self.worker.check_open()
+            self.status.clear_card()              # the old exercise's stop message goes with it
+            layout.clear(self.client.gui, keep=self.docks.kept())   # docks stay
+            self.client.scene.reset()
+            self._start(exercise, overrides, recording)
+
+    def _on_query(self, fields: dict[str, str]) -> None:
+        """The page's query string, as the browser reported it (``app/panels/page_query.py``)."""
+        if fields.get("assignment"):
+            self.assignment.offer(fields["assignment"], self._show_error)
+        elif "instructor" in fields:
+            self.instructor.offer(fields["instructor"], self._show_error)
+        elif fields.get("experiment") and self.saved.saved_note is not None:
+            self.saved.open(fields["experiment"], self.exercises, self._switch)
+
+    def _stop_lab(self) -> None:
+        """The shown exercise's frames and analyses stop writing; their last updates go out."""
         with self.gui_lock:
             self.generation = next(self.generations)  # the old frames and analyses stop writing
         if self.stream is not None:
@@ -215,12 +244,14 @@ class LabSession:
         # reports updates of removed charts): let the last updates go out in a batch of their own.
         self.client.flush()
         time.sleep(SETTLE_BEFORE_REMOVAL_S)
+
+    def _leave_lab(self) -> None:
+        """The tab stops its lab for another page (the instructor's): the GUI and 3D view go."""
+        self._stop_lab()
         with self.gui_lock:
-            self.worker.check_open()
-            self.status.clear_card()              # the old exercise's stop message goes with it
-            layout.clear(self.client.gui, keep=self.docks.kept())   # docks stay
+            self.state.running = False
+            self.client.gui.reset()
             self.client.scene.reset()
-            self._start(exercise, overrides, recording)
 
     def _choose(self, title: str) -> None:
         chosen = next((e for e in self.exercises.values() if e.title == title), None)
@@ -268,12 +299,15 @@ class LabSession:
         self.saved.add_folder(gui, on, lambda code: self.saved.open(code, self.exercises, self._switch))
         self.saved.show_codes()
         gui.add_markdown(f"### {exercise.title}")
+        self.assignment.add_panel(gui, exercise)  # a student's assignment: Submit and the results
         self.status.add_line(gui)
         buttons = gui.add_button_group("Simulation", ("Run", "Pause", "Reset"))
         buttons.on_click(on("buttons", lambda: self._on_button(buttons.value)))
         self.status.add_speed(gui)                # filled in while it runs
         self.controls.add_error_line(gui)         # under the buttons, in view (not at the foot of the controls)
         self.inspector = FilterInspector.add(gui, self.state.simulation, on("inspector step", self._step_one))
+        self.debugger = FilterDebugger.add(gui, self.state.simulation, on, keep=lambda q, r, model: filter_branch.keep(
+            self.state.exercise, self.state.values_now(), model, q, r, self.controls.follow))
         ActionPanel(gui, exercise, on, self.state.values_now, self._still_current(), self.gui_lock,
                     self.worker, self.client, plot_chart)   # the exercise's buttons, if any
         if self.scene is not None:
@@ -289,6 +323,7 @@ class LabSession:
             download.on_click(on("download", self._on_download))
             self.download_note = gui.add_markdown("")     # what the button did, where the student looks
         self.controls.add(gui, exercise, values)
+        self.assignment.fix(self.controls.inputs, self.controls.entries, chooser)
         gui.add_html(scope.LEGEND_STYLE)
         gui.add_html(entry.STYLE)
         gui.add_html(page.STYLE)
@@ -471,6 +506,8 @@ class LabSession:
             with self.state.lock:
                 running, simulation = self.state.running, self.state.simulation
                 self.inspector.show(running, simulation)
+                if self.debugger is not None:
+                    self.debugger.show(running, simulation)
 
     def _request_analysis(self) -> None:
         """Ask the analysis thread for the current values; a newer request supersedes an older one."""

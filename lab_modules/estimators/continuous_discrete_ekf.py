@@ -45,6 +45,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from lab_modules.estimators.filter_history import FilterModel
 from lab_modules.estimators.kalman import update_scalar
 from lab_modules.plants.maglev_ball import TABLE_3_1, MaglevPlant, derivative, jacobian
 
@@ -97,6 +98,28 @@ def propagate(x, P, u, p, Q, dt, n_substeps):
     """Integrate eq. 2.43-2.45 over dt with u held: RK4 in ``n_substeps`` steps (in place)."""
     for _ in range(n_substeps):
         _rk4_step(x, P, u, 0.0, p, Q, 0.0, dt / n_substeps)
+
+
+#: Eq. 2.43-2.45 in LaTeX (the filter debugger's equations); states (x1 [m], x2 [m/s], x3 [A]).
+PREDICTION_LATEX = (r"\hat{x}^+_{k-1} + \int (f(x) + g\,u_{k-1})\,dt",
+                    r"P^+_{k-1} + \int (F P + P F^T + Q)\,dt,\ F = \partial f/\partial x|_{x(t)}")
+STATES = (("air gap x₁", "m"), ("ball velocity x₂", "m/s"), ("coil current x₃", "A"))
+MEASUREMENTS = (("position sensor", "m"),)
+
+
+def history_model(title: str, sample_time_s: float, constants: np.ndarray, Q, r_m2: float, n_substeps: int,
+                  fixed_interval: bool) -> FilterModel:
+    """The filter as ``filter_history`` replays it: H = [1 0 0], R = r, and ``propagate`` as its
+    propagation (x̂⁺, P⁺, u = (voltage [V],), q_scale, dt) -> (x̂⁻, P⁻, None, None) - eq. 2.45
+    integrates P, there is no one Φ_k.  ``fixed_interval``: over ``sample_time_s`` as the loop does
+    (else over the interval between the samples' times, as ``run_observer`` on a recording)."""
+    Q = np.asarray(Q, dtype=float)
+
+    def history_step(x, P, u, q_scale, dt):
+        propagate(x, P, float(u[0]), constants, Q * q_scale, sample_time_s if fixed_interval else dt, n_substeps)
+        return x, P, None, None
+    return FilterModel.propagated(title, sample_time_s, 1, [_POSITION_ROW], Q, [r_m2], STATES, MEASUREMENTS,
+                                  history_step, PREDICTION_LATEX)
 
 
 #: H = dh/dx for h(x) = x1 (the position sensor).

@@ -165,6 +165,23 @@ def predict(model, x, P, u, Q, p, F, Phi, work):
     propagate_covariance(P, Phi, Q, work[1], N_STATES)
 
 
+def propagation(model: int, Q: np.ndarray, p: np.ndarray):
+    """``predict`` as ``filter_history.FilterModel.propagation`` takes it: (x̂⁺, P⁺, u, q_scale, dt)
+    -> (x̂⁻, P⁻, Φ_k, Q_k) with Φ_k from F at x̂⁺ (eq. 7, 15) and Q_k = q_scale Q (the sample time
+    is the filter's own, p[8])."""
+    def propagate(x, P, u, q_scale, dt):
+        F, Phi, work = np.empty((N_STATES, N_STATES)), np.empty((N_STATES, N_STATES)), np.empty((6, N_STATES, N_STATES))
+        Q_k = Q * q_scale
+        predict(model, x, P, float(u[0]), Q_k, p, F, Phi, work)
+        return x, P, Phi, Q_k
+    return propagate
+
+
+#: The prediction of eq. 6 in LaTeX (the filter debugger's equations).
+PREDICTION_LATEX = (r"\mathrm{RK4}(f, \hat{x}^+_{k-1}, u_{k-1})",
+                    r"\Phi_k P^+_{k-1}\Phi_k^T + Q,\ \Phi_k = I + F T + F^2 T^2/2,\ F = \partial f/\partial x|_{\hat{x}^+_{k-1}}")
+
+
 class _ExtendedFilter:
     """Step-by-step wrapper of the kernels (filterpy style: ``x``, ``P``, ``Q``,
     ``R``, ``predict``, ``update``; ``Phi`` and ``nis`` of the last steps)."""

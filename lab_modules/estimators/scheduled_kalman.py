@@ -132,3 +132,34 @@ class AxialKalmanFilter:
 
     def update(self, y_v: float) -> None:
         correct(self.z, self.P, y_v, self.physics[VAR_SENSOR])
+
+
+#: The filters' states and measurement (label, SI unit), for the inspector and the debugger.
+STATES = (("position x", "m"), ("velocity v", "m/s"), ("disturbance force F_St", "N"), ("sensor state x_M", "V"))
+MEASUREMENTS = (("position sensor", "V"),)
+H = np.array([[0.0, 0.0, 0.0, 1.0]])
+#: The prediction (eq. 9-10) in LaTeX, its matrices scheduled on (i, x̂⁺).
+PREDICTION_LATEX = (r"A_k\hat{z}^+_{k-1} + B_k (i_{k-1}, 1)^T",
+                    r"A_k P^+_{k-1} A_k^T + Q_k,\ A_k, B_k, Q_k \text{ at } k_i, k_s(i_{k-1}, \hat{x}^+_{k-1})")
+
+
+def propagation(physics: np.ndarray, factors=None):
+    """The prediction as ``filter_history.FilterModel.propagation`` takes it: (ẑ⁺, P⁺, u = (i [A],),
+    q_scale, dt) -> (ẑ⁻, P⁻, A_k, Q_k).  ``factors(i, x̂⁺) -> (k_i [N/A], k_s [N/m])`` schedules
+    the linear model (eq. 9-10, ``predict_linear``); None: the EKF with the force law
+    (``predict_exact_force``).  q_scale multiplies var_process and q_F, hence Q_k."""
+    def propagate(z, P, u, q_scale, dt):
+        scaled = physics.copy()
+        scaled[VAR_PROCESS] *= q_scale
+        scaled[Q_FORCE] *= q_scale
+        A, B, Q = np.zeros((N_STATES, N_STATES)), np.zeros((N_STATES, 2)), np.zeros((N_STATES, N_STATES))
+        current = float(u[0])
+        if factors is None:
+            predict_exact_force(z, P, scaled, current, A, B, Q)
+        else:
+            k_i, k_s = factors(current, z[0])
+            model_matrices(float(k_i), float(k_s), scaled, A, B)
+            process_noise(scaled, B, Q)
+            predict_linear(z, P, A, B, Q, current)
+        return z, P, A, Q
+    return propagate

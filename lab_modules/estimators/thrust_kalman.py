@@ -43,16 +43,19 @@ PAPER_Q_N2 = process_noise_from_p0()
 
 @dataclass(frozen=True)
 class ThrustFilterDesign:
-    """The filter of eq. 14-18: Taylor model (eq. 9-11), Q [N²] on f_dis, R [m²] on z."""
+    """The filter of eq. 14-18: Taylor model (eq. 9-11), Q [N²] on f_dis, R [m²] on z;
+    ``exact_model``: the exact ZOH matrices e^{AT}, ∫e^{At}dt B instead (the plant's own)."""
 
     process_noise_n2: float = PAPER_Q_N2
     measurement_variance_m2: float = (5e-6) ** 2
     bearing: ThrustBearing = TABLE_1
+    exact_model: bool = False
 
     @cached_property
     def matrices(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(Φ, B_d, Q_d = G_d Q G_d^T) of eq. 9-11, 15."""
-        Phi, B_d, G_d = self.bearing.taylor_discretisation()
+        """(Φ, B_d, Q_d = G_d Q G_d^T) of eq. 9-11, 15 (or of the exact discretisation)."""
+        Phi, B_d, G_d = (self.bearing.exact_discretisation() if self.exact_model
+                         else self.bearing.taylor_discretisation())
         return Phi, B_d, self.process_noise_n2 * np.outer(G_d, G_d)
 
     def filter(self, x0=(-0.75e-3, 0.0), P0=PAPER_P0) -> KalmanFilter:

@@ -110,6 +110,10 @@ class Simulation(Protocol):
     # ((label, SI unit), ...), ``x`` (n,), ``P`` (n, n), ``measurements`` ((label, unit), ...),
     # ``K`` (n, m), ``innovation`` (m,) and ``innovation_sigma`` (m,) = √diag(S) against the
     # prior (K and the innovation None for a filter that corrects continuously).
+    # ``filter_tape() -> estimators.filter_history.FilterTape``: for a linear filter, the bounded
+    # record of what it read (its matrices, the prior at the start, per sample u, y and the true
+    # state): the app's filter debugger replays its history from it (step back, branch with another
+    # Q or R, covariance ellipses, NEES/NIS), and ``python -m app run --filter-history`` prints it.
 
 
 class SceneView(Protocol):

@@ -153,6 +153,10 @@ class AdaptiveFilterSimulation:
     def filter_state(self) -> dict | None:
         return self.loop.filter_state()
 
+    def filter_tape(self):
+        """The loop's record of its shown filter (``axial_bearing_loop.LoopSimulation.filter_tape``)."""
+        return self.loop.filter_tape()
+
     def status_message(self) -> str:
         return self.loop.status_message()
 

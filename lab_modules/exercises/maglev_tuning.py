@@ -32,8 +32,10 @@ from lab_modules.estimators.continuous_discrete_ekf import (
     OBSERVER_COLUMNS,
     ObserverFilter,
     RecordedSamples,
+    history_model,
     run_observer,
 )
+from lab_modules.estimators.filter_history import FilterTape
 from lab_modules.estimators.kalman import correction
 from lab_modules.exercises import Analysis, Chart, Exercise, Plot, PoleCategory, Series
 from lab_modules.exercises._common import MAGLEV_LAGS, magnet_plant_names
@@ -455,12 +457,24 @@ class Replay:
         self.r = float(observed["filter_sensor_noise_m"][0]) ** 2
         self.position = 0
         self.stepped = False
+        self.tape = FilterTape(history_model("continuous-discrete EKF replaying the recording (paper 004 §3.5)",
+                                             self.sample_time_s, TABLE_3_1.constants(), observed["Q"], self.r, 1,
+                                             fixed_interval=False))
 
     def advance(self, n_steps: int) -> np.ndarray:
-        chunk = self.table[self.position:self.position + max(n_steps, 0)]
+        first = self.position
+        chunk = self.table[first:first + max(n_steps, 0)]
         self.position += chunk.shape[0]
         self.stepped = n_steps == 1 and chunk.shape[0] == 1
+        if chunk.shape[0]:                    # a recording has no true state: NEES is not available
+            voltage = chunk[:, 1 + self.columns.index("coil_voltage_v")]
+            self.tape.record(first, self.priors[first, :3], self.priors[first, 3:].reshape(3, 3), chunk[:, 0],
+                             voltage, self.measured_m[first:self.position], np.full((chunk.shape[0], 3), np.nan))
         return chunk
+
+    def filter_tape(self) -> FilterTape:
+        """The record of the observer's inputs (``estimators.filter_history``), replayed by the filter debugger."""
+        return self.tape
 
     def filter_state(self) -> dict | None:
         """The continuous-discrete EKF (eq. 2.40-2.42, H = [1 0 0]) at the sample of the last

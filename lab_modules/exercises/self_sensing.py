@@ -25,14 +25,14 @@ the paper with the lab's parameter set (``plants.self_sensing_ball``).
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import replace
 
 import numpy as np
 
 from lab_modules.claims import Claim
-from lab_modules.estimators.ripple_inductance import fit, predicted_sigma_inductance_h
+from lab_modules.estimators.ripple_inductance import predicted_sigma_inductance_h
+from lab_modules.loops.self_sensing_levitation import LevitatedLoop
 from lab_modules.loops.self_sensing_loop import (
     COLUMN,
     COLUMNS,
@@ -41,10 +41,19 @@ from lab_modules.loops.self_sensing_loop import (
     SelfSensingSetup,
 )
 from lab_modules.parameters import Parameter, in_si
-from lab_modules.plants.self_sensing_ball import RIG
 from lab_modules.scenes.self_sensing import SelfSensingScene
 
 from . import Action, Analysis, Chart, Exercise, Plot, PoleCategory, Series
+from . import _self_sensing_geometry as geometry
+from . import _self_sensing_levitation as levitation
+from ._self_sensing_statistics import (
+    IDEAL,
+    eq25_shift_h,
+    moving_offset_shift,
+    statistics,
+    trajectory_statistics,
+)
+from ._self_sensing_views import RIPPLE_PERIODS, histogram, live_readouts, monte_carlo_views, ripple_plots
 
 SAMPLE_TIMES_US = ("0.5", "1", "2")
 PWM_MODES = ("fixed T_pwm", "T_pwm = 1024 T_a")
@@ -53,7 +62,6 @@ SETTLE_PERIODS = 40          # periods before a stationary run is measured (the 
 NOISY_PERIODS = 5000         # stationary periods per gap with noise: coverage of ±3σ̂ over ≥ 5000 periods
 QUIET_PERIODS = 300          # stationary periods per gap without noise
 LAST_PERIODS = 500           # the live "empirical std" window
-RIPPLE_PERIODS = 2           # PWM periods in the ripple zoom
 LIVE_RIPPLE_POINTS = 256     # samples per live ripple plot (every 8th of 2 × 1024): 1 kB per series and update
 MONTE_CARLO_SEEDS = 4        # the Monte-Carlo button: seeds × periods held at one gap
 MONTE_CARLO_PERIODS = 1250
@@ -116,7 +124,7 @@ PARAMETERS = (
       group="Run"),
     P("time_scale", "Time scale", "×", 0.25, 0.01, 2.0,
       "Simulated seconds per wall-clock second in the browser (1 = real time).", log=True, group="Run"),
-)
+) + geometry.PARAMETERS + levitation.PARAMETERS
 
 
 def setup(values: dict, **changes) -> SelfSensingSetup:
@@ -137,7 +145,8 @@ def setup(values: dict, **changes) -> SelfSensingSetup:
         voltage_offset_v=values["voltage_offset_v"], sigma_current_a=si["sigma_current_ma"],
         sigma_voltage_v=si["sigma_voltage_mv"], trim_samples=trim, gap_1_m=gap_1, gap_2_m=gap_2,
         transition_s=values["transition_s"], trajectory=values["trajectory"],
-        battery_voltage_v=values["battery_voltage_v"], printed_dof=values["equation_28"] != "M − d")
+        battery_voltage_v=values["battery_voltage_v"], printed_dof=values["equation_28"] != "M − d",
+        rig=geometry.rig(values))
     return replace(s, **changes)
 
 
@@ -153,11 +162,12 @@ def coil_pole_set(gap_m: float) -> str:
 
 # -- derived per-period columns --------------------------------------------------------------------
 EXTRA_COLUMNS = ("gap_shown_m", "sigma_gap_shown_m", "gap_error_m", "inductance_error_h", "zero",
-                 "inductance_ratio")
+                 "inductance_ratio", "voltage_gain_estimate", "gain_ratio_set")
 
 
-def derived(rows: np.ndarray, source: str) -> np.ndarray:
-    """The position the chosen estimate gives, with its σ̂ (eq. 32), and the errors."""
+def derived(rows: np.ndarray, s: SelfSensingSetup, source: str) -> np.ndarray:
+    """The position the chosen estimate gives, with its σ̂ (eq. 32), the errors, and Fig. 2's gains
+    μ̂ = L̄_m/L and η̂ = L/L̄_m (eq. 22; each reads its own gain when the other is 1) with the set μ/η."""
     c = COLUMN
     if source == POSITION_SOURCES[0]:
         gap, sigma_l, inductance = rows[:, c["gap_estimated_m"]], rows[:, c["sigma_inductance_mean_h"]], None
@@ -167,12 +177,13 @@ def derived(rows: np.ndarray, source: str) -> np.ndarray:
         inductance = rows[:, c[f"inductance_{phase}_h"]]
         sigma_l = rows[:, c[f"sigma_inductance_{phase}_h"]]
         with np.errstate(all="ignore"):
-            gap = RIG.gap_m(inductance)
-            sigma = RIG.position_sensitivity_m_per_h(inductance) * sigma_l
+            gap = s.rig.gap_m(inductance)
+            sigma = s.rig.position_sensitivity_m_per_h(inductance) * sigma_l
     truth = rows[:, c["inductance_true_h"]]
+    ratio = rows[:, c["inductance_mean_h"]] / truth                         # eq. 22: L̄_m/L = μ/η
     return np.column_stack([gap, sigma, gap - rows[:, c["gap_true_m"]],
-                            rows[:, c["inductance_mean_h"]] - truth, np.zeros(len(rows)),
-                            rows[:, c["inductance_mean_h"]] / truth])
+                            rows[:, c["inductance_mean_h"]] - truth, np.zeros(len(rows)), ratio, 1.0 / ratio,
+                            np.full(len(rows), s.current_gain / s.voltage_gain)])
 
 
 class SelfSensingSimulation:
@@ -183,7 +194,8 @@ class SelfSensingSimulation:
 
     def __init__(self, values: dict, loop: SelfSensingLoop | None = None):
         self.values = dict(values)
-        self.loop = loop or SelfSensingLoop(setup(values), seed=int(values["seed"]))
+        self.loop = loop or (LevitatedLoop(setup(values), levitation.loop_control(values), seed=int(values["seed"]))
+                             if levitation.levitated(values) else SelfSensingLoop(setup(values), seed=int(values["seed"])))
         self.sample_time_s = self.loop.setup.period_s
         self.wall_s, self.simulated_s = 0.0, 0.0
         self.ripple = (np.empty((0, 5)), np.empty(0))    # (raw samples of ≤ 2 periods, their duties)
@@ -196,16 +208,17 @@ class SelfSensingSimulation:
         newest, raw = self.loop.run(min(n_steps, RIPPLE_PERIODS), raw_samples=RIPPLE_PERIODS * n)
         rows = np.concatenate([older, newest])
         self.wall_s += time.perf_counter() - start
+        n_steps = len(rows)                  # fewer once a levitated ball has left its reference
         self.simulated_s += n_steps * self.sample_time_s
         if n_steps:
             kept, duties = self.ripple
             self.ripple = (np.concatenate([kept, raw])[-RIPPLE_PERIODS * n:],
                            np.concatenate([duties, newest[:, COLUMN["duty"]]])[-RIPPLE_PERIODS:])
         t = (first + 0.5 + np.arange(n_steps)) * self.sample_time_s
-        return np.column_stack([t, rows, derived(rows, self.values["position_from"])])
+        return np.column_stack([t, rows, derived(rows, self.loop.setup, self.values["position_from"])])
 
     def status_message(self) -> str:
-        return ""
+        return self.loop.stop_message
 
     def realtime_factor(self) -> float:
         return self.simulated_s / self.wall_s if self.wall_s > 0 else float("nan")
@@ -222,105 +235,6 @@ def stationary(values: dict, gap: str, periods: int | None = None, seed_offset: 
     loop.run(SETTLE_PERIODS)
     rows, _ = loop.run(periods)
     return rows
-
-
-def statistics(rows: np.ndarray, reference: np.ndarray | None = None) -> dict:
-    """What the claims read from one stationary run (``reference``: the same gap measured ideally)."""
-    c = COLUMN
-    truth = rows[:, c["inductance_true_h"]]
-    estimates = {"phase_1": rows[:, c["inductance_1_h"]], "phase_2": rows[:, c["inductance_2_h"]],
-                 "mean": rows[:, c["inductance_mean_h"]]}
-    error = estimates["mean"] - truth
-    sigma = rows[:, c["sigma_inductance_mean_h"]]
-    gap_error = rows[:, c["gap_estimated_m"]] - rows[:, c["gap_true_m"]]
-    result = {
-        "inductance_true_mh": float(np.mean(truth) * 1e3),
-        "duty": float(np.mean(rows[:, c["duty"]])),
-        "half_period_error_percent": {k: float(np.mean(v / truth - 1.0) * 100) for k, v in estimates.items()},
-        "max_relative_error": {k: float(np.max(np.abs(v / truth - 1.0))) for k, v in estimates.items()},
-        "inductance_ratio": float(np.mean(estimates["mean"] / truth)),
-        "position_bias_um": float(np.mean(gap_error) * 1e6),
-        "position_error_max_um": float(np.max(np.abs(gap_error)) * 1e6),
-        "sigma_current_ma": float(np.mean(rows[:, [c["sigma_current_1_a"], c["sigma_current_2_a"]]]) * 1e3),
-        "predicted_sigma_half_period_uh": {"phase_1": float(np.mean(rows[:, c["sigma_inductance_1_h"]]) * 1e6),
-                                           "phase_2": float(np.mean(rows[:, c["sigma_inductance_2_h"]]) * 1e6)},
-        "predicted_sigma_inductance_uh": float(np.mean(sigma) * 1e6),
-        "predicted_sigma_position_um": float(np.mean(rows[:, c["sigma_gap_m"]]) * 1e6),
-        "empirical_sigma_inductance_uh": float(np.std(error) * 1e6),
-        "monte_carlo_to_predicted_ratio": float(np.std(error) / np.mean(sigma)),
-        "within_3sigma_percent": float(np.mean(np.abs(error) <= 3.0 * sigma) * 100),
-        "weights": [float(np.mean(rows[:, c["weight_1"]])), float(np.mean(rows[:, c["weight_2"]]))],
-        "delta_current_ma": [float(np.mean(rows[:, c["delta_current_1_a"]]) * 1e3),
-                             float(np.mean(rows[:, c["delta_current_2_a"]]) * 1e3)],
-        "periods": len(rows),
-    }
-    if reference is not None:
-        ideal = {"phase_1": reference[:, c["inductance_1_h"]], "phase_2": reference[:, c["inductance_2_h"]],
-                 "mean": reference[:, c["inductance_mean_h"]]}
-        result["shift_vs_ideal_uh"] = {k: float((np.mean(estimates[k]) - np.mean(ideal[k])) * 1e6) for k in ideal}
-    return result
-
-
-IDEAL = {"current_gain": 1.0, "voltage_gain": 1.0, "current_offset_a": 0.0, "voltage_offset_v": 0.0,
-         "sigma_current_a": 0.0, "sigma_voltage_v": 0.0, "resistance_ratio": 1.0, "printed_eq7": False}
-
-
-def histogram(normalised: np.ndarray, where: str = "gap 1") -> Plot:
-    """(L̄ − L)/σ̂ against the standard normal density."""
-    normalised = normalised[np.isfinite(normalised)]
-    edges = np.linspace(-4.0, 4.0, 33)
-    counts, _ = np.histogram(normalised, bins=edges)
-    centres = 0.5 * (edges[1:] + edges[:-1])
-    density = counts / (max(len(normalised), 1) * (edges[1] - edges[0]))
-    return Plot(f"Monte-Carlo at {where}: (L̄ − L)/σ̂(L̄) per PWM period against N(0, 1)",
-                "normalised error (L̄ − L)/σ̂ [1]", "density [1]", centres,
-                (("histogram", density, "#1f77b4"),
-                 ("N(0, 1)", np.exp(-0.5 * centres**2) / math.sqrt(2 * math.pi), "#d62728")))
-
-
-def ripple_plots(s: SelfSensingSetup, raw: np.ndarray, duties: np.ndarray, title: str,
-                 points: int | None = None) -> list[Plot]:
-    """The ripple zoom of two PWM periods from their raw samples (rows: time, true i, measured
-    i, measured v, applied v; ``duties`` per period): true and measured current, the LS
-    windows (shaded), the lines fitted over them (eq. 9-10) and the voltage.  ``points``:
-    draw every k-th sample, at most this many (the fits use them all).  Before two periods
-    have run, the plots are empty (zeros) with the same series."""
-    n = s.samples_per_period
-    total = RIPPLE_PERIODS * n
-    step = 1 if points is None else -(-total // points)
-    shown = np.arange(0, total, step)
-    t_us = shown * s.sample_time_s * 1e6
-    ready = len(raw) == total and len(duties) == RIPPLE_PERIODS
-    raw = raw if ready else np.zeros((total, 5))
-    r_hat = s.resistance_ratio * RIG.coil_resistance_ohm * (-1.0 if s.printed_eq7 else 1.0)
-    dof = "M + d" if s.printed_dof else "M-d"
-    fits, windows = [], []
-    for p in range(RIPPLE_PERIODS):
-        n_on = round(duties[p] * n) if ready else n // 2
-        current, voltage = raw[p * n:(p + 1) * n, 2], raw[p * n:(p + 1) * n, 3]
-        # phase II ends one sample early: the sample after the period is not in ``raw``
-        for phase, (start, stop) in enumerate(((s.trim_samples, n_on - s.trim_samples),
-                                               (n_on + s.trim_samples, n - s.trim_samples - 1))):
-            line = np.full(len(shown), np.nan)
-            windows.append(((p * n + start) * s.sample_time_s * 1e6,
-                            (p * n + stop) * s.sample_time_s * 1e6))
-            if ready:
-                result = fit(current, voltage, start, stop, r_hat, s.sample_time_s, dof)
-                flux = np.concatenate([[0.0], np.cumsum(voltage[start:stop] - r_hat * current[start:stop])])
-                inside = np.flatnonzero((shown >= p * n + start) & (shown <= p * n + stop))
-                # the line at ≤ 17 points of the window (NaN elsewhere costs next to nothing on the wire)
-                inside = inside[np.unique(np.linspace(0, len(inside) - 1, min(len(inside), 17)).round().astype(int))]
-                line[inside] = (result["initial_current_a"]
-                                + s.sample_time_s / result["inductance_h"] * flux[shown[inside] - p * n - start])
-            fits.append((f"fit {'I' * (phase + 1)}, period {p + 1}", line, "#ff7f0e" if phase == 0 else "#2ca02c"))
-    raw = raw[shown]
-    windows = tuple(windows)
-    return [
-        Plot(title, "time [µs]", "current [A]", t_us,
-             (("measured i_m", raw[:, 2], "#a0a0a0"), ("true i", raw[:, 1], "#000000"), *fits), shade=windows),
-        Plot("Bridge voltage of the same two periods", "time [µs]", "voltage [V]", t_us,
-             (("applied v", raw[:, 4], "#000000"), ("measured v_m", raw[:, 3], "#9467bd")), shade=windows),
-    ]
 
 
 class SelfSensing(Exercise):
@@ -345,9 +259,15 @@ class SelfSensing(Exercise):
             band=("inductance_mean_h", "sigma_inductance_mean_h")),
         Chart("Gap", "mm", (
             Series("estimated ŝ", "gap_shown_m", 1e3, "#d62728"),
-            Series("true s", "gap_true_m", 1e3, "#000000")), band=("gap_shown_m", "sigma_gap_shown_m")),
+            Series("true s", "gap_true_m", 1e3, "#000000"),
+            Series("reference r (levitated)", "gap_reference_m", 1e3, "#7f7f7f")),
+              band=("gap_shown_m", "sigma_gap_shown_m")),
         Chart("Gap error ŝ − s ±3σ̂", "µm", (Series("ŝ − s", "gap_error_m", 1e6, "#d62728"),),
               band=("zero", "sigma_gap_shown_m")),
+        Chart("Gains from L̄ (eq. 22, Fig. 2): μ̂ = L̄_m/L, η̂ = L/L̄_m", "1", (
+            Series("μ̂ = L̄_m/L", "inductance_ratio", 1.0, "#d62728"),
+            Series("η̂ = L/L̄_m", "voltage_gain_estimate", 1.0, "#1f77b4"),
+            Series("set μ/η", "gain_ratio_set", 1.0, "#7f7f7f"))),
         Chart("Predicted spread σ̂(L̂)", "µH", (
             Series("σ̂(L̄)", "sigma_inductance_mean_h", 1e6, "#d62728"),
             Series("σ̂(L̂ᴵ)", "sigma_inductance_1_h", 1e6, "#ff7f0e"),
@@ -362,16 +282,16 @@ class SelfSensing(Exercise):
         gaps = np.array([s.gap_1_m, s.gap_2_m])
         return {"plant": "paper 001 eq. 1-4 with the lab's parameter set (plants.self_sensing_ball)",
                 "estimator": "eq. 7 (with − R̂ i), 9-10, 18 (denominator with īᴵᴵ), 28 (M − d), 29-32",
-                "constants": {"turns": RIG.turns, "relative_permeability": RIG.relative_permeability,
-                              "core_reluctance_per_h": RIG.core_reluctance_per_h,
-                              "ball_reluctance_per_h": RIG.ball_reluctance_per_h,
-                              "leakage_reluctance_per_h": RIG.leakage_reluctance_per_h,
-                              "gap_reluctance_slope_per_h_m": RIG.gap_reluctance_slope_per_h_m,
-                              "coil_resistance_ohm": RIG.coil_resistance_ohm, "ball_mass_kg": RIG.ball_mass_kg},
+                "constants": {"turns": s.rig.turns, "relative_permeability": s.rig.relative_permeability,
+                              "core_reluctance_per_h": s.rig.core_reluctance_per_h,
+                              "ball_reluctance_per_h": s.rig.ball_reluctance_per_h,
+                              "leakage_reluctance_per_h": s.rig.leakage_reluctance_per_h,
+                              "gap_reluctance_slope_per_h_m": s.rig.gap_reluctance_slope_per_h_m,
+                              "coil_resistance_ohm": s.rig.coil_resistance_ohm, "ball_mass_kg": s.rig.ball_mass_kg},
                 "sample_time_s": s.sample_time_s, "samples_per_period": s.samples_per_period,
                 "pwm_period_s": s.period_s, "gaps_m": gaps.tolist(),
-                "inductance_h": RIG.inductance_h(gaps).tolist(),
-                "equilibrium_current_a": RIG.equilibrium_current_a(gaps).tolist()}
+                "inductance_h": s.rig.inductance_h(gaps).tolist(),
+                "equilibrium_current_a": s.rig.equilibrium_current_a(gaps).tolist()}
 
     def pole_categories(self, values: dict) -> dict[str, PoleCategory]:
         """Each gap's coil pole −R/L (its set named after the gap) is the plant's."""
@@ -385,16 +305,16 @@ class SelfSensing(Exercise):
         for gap in GAPS:
             gap_m = s.gap_1_m if gap == "gap_1" else s.gap_2_m
             at = f"At {gap_m * 1e3:g} mm: "                  # the group a long list folds
-            inductance = float(RIG.inductance_h(gap_m))
-            current = float(RIG.equilibrium_current_a(gap_m))
+            inductance = float(s.rig.inductance_h(gap_m))
+            current = float(s.rig.equilibrium_current_a(gap_m))
             rows = stationary(values, gap, periods=300)
             runs[gap] = rows
             st = statistics(rows)
             windows = [st["duty"] * s.samples_per_period - 2 * s.trim_samples + 1,
                        (1 - st["duty"]) * s.samples_per_period - 2 * s.trim_samples + 1]
             ramp = [predicted_sigma_inductance_h(inductance, s.sigma_current_a, v, round(m), s.sample_time_s)
-                    for v, m in zip((v_bat - RIG.coil_resistance_ohm * current,
-                                     v_bat + RIG.coil_resistance_ohm * current), windows)]
+                    for v, m in zip((v_bat - s.rig.coil_resistance_ohm * current,
+                                     v_bat + s.rig.coil_resistance_ohm * current), windows)]
             readouts += [
                 (f"{at}L (eq. 2)", inductance * 1e3, "mH"),
                 (f"{at}equilibrium current", current, "A"),
@@ -415,12 +335,21 @@ class SelfSensing(Exercise):
                 (f"{at}σ̂(L̄) (eq. 31)", st["predicted_sigma_inductance_uh"], "µH"),
                 (f"{at}σ̂(ŝ) (eq. 32)", st["predicted_sigma_position_um"], "µm"),
             ]
-            poles[coil_pole_set(gap_m)] = np.array([-RIG.coil_resistance_ohm / inductance], dtype=complex)
+            poles[coil_pole_set(gap_m)] = np.array([-s.rig.coil_resistance_ohm / inductance], dtype=complex)
         notes = [("Readouts from 300 PWM periods held at each gap with the current settings; the histogram "
                  "is from those at gap 1. *Run Monte-Carlo* (controls, left) checks σ̂(L̄) over "
                  f"{MONTE_CARLO_SEEDS} seeds × {MONTE_CARLO_PERIODS} periods.")]
         quick = runs["gap_1"]
-        return Analysis(readouts, poles, notes, self.ripple_plots(values) + [histogram(
+        extra, more_notes, plots = geometry.analysis(s)
+        readouts += extra
+        notes += more_notes
+        if levitation.levitated(values):
+            extra, more_notes, more_plots = levitation.analysis(
+                s, values, statistics(runs["gap_1"])["predicted_sigma_position_um"] * 1e-6)
+            readouts += extra
+            notes += more_notes
+            plots = more_plots + plots
+        return Analysis(readouts, poles, notes, plots + self.ripple_plots(values) + [histogram(
             (quick[:, COLUMN["inductance_mean_h"]] - quick[:, COLUMN["inductance_true_h"]])
             / quick[:, COLUMN["sigma_inductance_mean_h"]], f"{s.gap_1_m * 1e3:g} mm (300 periods)")])
 
@@ -454,30 +383,13 @@ class SelfSensing(Exercise):
         ``seeds`` × ``periods`` PWM periods against the mean predicted σ̂(L̄), the share inside ±3σ̂ and the
         histogram of (L̄ − L)/σ̂ against N(0, 1).  Yields the figures after every seed (progress)."""
         gap = "gap_2" if values["trajectory"] == TRAJECTORIES[2] else "gap_1"
-        gap_mm = values[f"{gap}_mm"]
-        c = COLUMN
-        notes = [] if values["sigma_current_ma"] > 0 or values["sigma_voltage_mv"] > 0 else [
-            ("No noise is set: σ̂ only measures the ramp's curvature and the ratio means little. "
-            "Set σ(i) = 1 mA, σ(v) = 15 mV (§5).")]
-        runs = []
-        yield Analysis([("Periods simulated", 0, f"of {seeds * periods}")], {},
-                       [f"Monte-Carlo at {gap_mm:g} mm: seed 1 of {seeds} …", *notes])
-        for k in range(seeds):
-            runs.append(stationary(values, gap, periods=periods, seed_offset=1000 + k))
-            rows = np.concatenate(runs)
-            st = statistics(rows)
-            normalised = ((rows[:, c["inductance_mean_h"]] - rows[:, c["inductance_true_h"]])
-                          / rows[:, c["sigma_inductance_mean_h"]])
-            done = k + 1 == seeds
-            progress = (f"Monte-Carlo at {gap_mm:g} mm: {k + 1} of {seeds} seeds done"
-                        + ("." if done else f", seed {k + 2} running …"))
-            yield Analysis([
-                ("MC std of L̄ − L / predicted σ̂(L̄)", st["monte_carlo_to_predicted_ratio"], ""),
-                ("Share of L̄ − L inside ±3σ̂(L̄)", st["within_3sigma_percent"], "%"),
-                ("Periods", st["periods"], f"({k + 1} seeds × {periods})"),
-                ("Empirical std of L̄ − L", st["empirical_sigma_inductance_uh"], "µH"),
-                ("Mean predicted σ̂(L̄) (eq. 31)", st["predicted_sigma_inductance_uh"], "µH"),
-            ], {}, [progress, *notes], [histogram(normalised, f"{gap_mm:g} mm")])
+        yield from monte_carlo_views(lambda k: stationary(values, gap, periods=periods, seed_offset=1000 + k),
+                                     seeds, periods, values[f"{gap}_mm"],
+                                     values["sigma_current_ma"] > 0 or values["sigma_voltage_mv"] > 0)
+
+    def open_loops(self, values: dict) -> dict:
+        """With feedback on ŝ: the position loop at gap 1, broken at the current command."""
+        return levitation.open_loops(setup(values), values)
 
     def simulation(self, values: dict) -> SelfSensingSimulation:
         return SelfSensingSimulation(values)
@@ -493,7 +405,9 @@ class SelfSensing(Exercise):
         a new PWM period length starts afresh."""
         new = setup(values)
         old = simulation.loop
-        if new.samples_per_period != old.setup.samples_per_period or new.sample_time_s != old.setup.sample_time_s:
+        if (new.samples_per_period != old.setup.samples_per_period or new.sample_time_s != old.setup.sample_time_s
+                or levitation.levitated(values) != isinstance(old, LevitatedLoop)
+                or isinstance(old, LevitatedLoop) and old.control != levitation.loop_control(values)):
             return self.simulation(values)
         carried = SelfSensingSimulation(values, old.retuned(new))
         carried.ripple = simulation.ripple
@@ -508,33 +422,14 @@ class SelfSensing(Exercise):
                 *(plot_figure(plot) for plot in analysis_plots(self, values, ("Ripple of two PWM periods",)))]
 
     def live_readouts(self, trace: dict[str, np.ndarray]) -> list[tuple[str, float, str]]:
-        last = slice(-LAST_PERIODS, None)
-        error = trace["inductance_error_h"][last]
-        sigma = trace["sigma_inductance_mean_h"][last]
-        return [
-            ("True L (newest period)", float(trace["inductance_true_h"][-1] * 1e3), "mH"),
-            ("L̄ (newest period)", float(trace["inductance_mean_h"][-1] * 1e3), "mH"),
-            ("L̄/L (mean)", float(np.mean(trace["inductance_ratio"][last])), ""),
-            ("Position bias ŝ − s (mean)", float(np.mean(trace["gap_error_m"][last]) * 1e6), "µm"),
-            ("Duty χ", float(trace["duty"][-1]), ""),
-            ("Δiᴵ", float(trace["delta_current_1_a"][-1] * 1e3), "mA"),
-            ("Δiᴵᴵ", float(trace["delta_current_2_a"][-1] * 1e3), "mA"),
-            ("Weight wᴵ", float(trace["weight_1"][-1]), ""),
-            ("Weight wᴵᴵ", float(trace["weight_2"][-1]), ""),
-            ("σ̂(i) (mean of both phases)", float(np.mean(trace["sigma_current_1_a"][last]
-                                                           + trace["sigma_current_2_a"][last]) * 500), "mA"),
-            ("σ̂(L̄) (mean)", float(np.mean(sigma) * 1e6), "µH"),
-            ("σ̂(ŝ) (mean)", float(np.mean(trace["sigma_gap_shown_m"][last]) * 1e6), "µm"),
-            ("Empirical std of L̄ − L (last 500 periods)", float(np.std(error) * 1e6), "µH"),
-            ("L̄ − L inside ±3σ̂", float(np.mean(np.abs(error) <= 3 * sigma) * 100), "%"),
-        ]
+        return live_readouts(trace, LAST_PERIODS)
 
     def metrics(self, values: dict, duration_s: float) -> dict:
         s = setup(values)
         gaps = np.array([s.gap_1_m, s.gap_2_m])
         result = {
-            "inductance_mh": dict(zip(GAPS, (RIG.inductance_h(gaps) * 1e3).tolist())),
-            "equilibrium_current_a": dict(zip(GAPS, RIG.equilibrium_current_a(gaps).tolist())),
+            "inductance_mh": dict(zip(GAPS, (s.rig.inductance_h(gaps) * 1e3).tolist())),
+            "equilibrium_current_a": dict(zip(GAPS, s.rig.equilibrium_current_a(gaps).tolist())),
         }
         per_gap = {}
         for gap in GAPS:
@@ -559,20 +454,20 @@ class SelfSensing(Exercise):
         simulation = SelfSensingSimulation(values)
         n_periods = max(round(duration_s / simulation.sample_time_s), 1)
         rows = simulation.advance(n_periods)[:, 1:]
-        c = COLUMN
-        truth = rows[:, c["inductance_true_h"]]
-        moving = np.abs(np.gradient(rows[:, c["gap_true_m"]])) > 0
-        result["trajectory"] = {
-            "mean_max_relative_error": float(np.max(np.abs(rows[:, c["inductance_mean_h"]] / truth - 1.0))),
-            "phase_1_max_relative_error": float(np.max(np.abs(rows[:, c["inductance_1_h"]]
-                                                              / rows[:, c["inductance_1_true_h"]] - 1.0))),
-            "phase_2_max_relative_error": float(np.max(np.abs(rows[:, c["inductance_2_h"]]
-                                                              / rows[:, c["inductance_2_true_h"]] - 1.0))),
-            "position_error_max_um": float(np.max(np.abs(rows[:, c["gap_estimated_m"]]
-                                                         - rows[:, c["gap_true_m"]])) * 1e6),
-            "moving_periods": int(np.sum(moving)),
-            "periods": len(rows),
-        }
+        result["trajectory"] = trajectory_statistics(rows)
+        if (s.voltage_offset_v or s.current_offset_a) and s.trajectory == TRAJECTORIES[0]:
+            ideal = SelfSensingSimulation({**values, "voltage_offset_v": 0.0, "current_offset_ma": 0.0})
+            ideal_rows = ideal.advance(n_periods)[:, 1:]
+            predicted = eq25_shift_h(ideal_rows, s.voltage_offset_v, s.current_offset_a,
+                                     s.rig.coil_resistance_ohm, s.samples_per_period, s.trim_samples,
+                                     s.sample_time_s)
+            result["trajectory"]["offset"] = moving_offset_shift(rows, ideal_rows, predicted)
+        if levitation.levitated(values):
+            result["levitation"] = levitation.metrics(setup(values), values, duration_s)
+        result["geometry"] = geometry.metrics(s)
+        if s.sigma_current_a > 0:
+            result["geometry"]["simulated_to_straight_ramp"] = (per_gap["gap_1"]["predicted_sigma_position_um"]
+                                                                / result["geometry"]["straight_ramp_sigma_gap_um"])
         result["realtime_factor"] = simulation.realtime_factor()
         result["duration_s"] = n_periods * simulation.sample_time_s
         result["status"] = "ok"
@@ -583,6 +478,10 @@ EXERCISE = SelfSensing()
 
 QUIET = {"sigma_current_ma": 0.0, "sigma_voltage_mv": 0.0}
 FIXED_4 = {**QUIET, "trajectory": TRAJECTORIES[1]}
+
+
+LEVITATED = {"feedback": levitation.FEEDBACK[1], "trajectory": TRAJECTORIES[1]}
+LEVITATION_RUN_S = 5.0         # about 60 closed-loop time constants: the spread measured to a few per cent
 
 
 def _within(value: float, relative: float) -> tuple[float, float]:
@@ -641,6 +540,17 @@ EXERCISE.claims = (
     Claim("paper 001 §4.2, eq. 25, Fig. 3", "largest L̄ shift with Δi = 0.05 ī = 75 mA, both gaps",
           "vanishingly small", "mean_shift_vs_ideal_uh_max", (0.0, 1.0), "µH",
           settings={**QUIET, "current_offset_ma": 75.0}),
+    Claim("paper 001 §4.2, eq. 25, Fig. 3", "largest L̄ shift with Δv = 0.57 V during the 4 ↔ 6 mm moves",
+          "vanishingly small", "trajectory.offset.shift_max_uh", (0.0, 2.5), "µH",
+          "against the same run without the offset; 6·10⁻⁵ of L", settings={**QUIET, "voltage_offset_v": 0.57}),
+    Claim("paper 001 §4.2, eq. 25", "that shift / eq. 25 (Δt, Δi, ī of the run), Δv = 0.57 V, moving",
+          "eq. 25", "trajectory.offset.shift_to_eq25", (0.9, 1.1), "",
+          "at the period of the largest shift: the moves make īᴵᴵ − īᴵ ≠ 0", settings={**QUIET, "voltage_offset_v": 0.57}),
+    Claim("paper 001 §4.2, eq. 25, Fig. 3", "largest L̄ shift with Δi = 75 mA during the moves",
+          "vanishingly small", "trajectory.offset.shift_max_uh", (0.0, 1.0), "µH",
+          settings={**QUIET, "current_offset_ma": 75.0}),
+    Claim("paper 001 §4.2, eq. 25", "that shift / eq. 25, Δi = 75 mA, moving", "eq. 25",
+          "trajectory.offset.shift_to_eq25", (0.9, 1.1), "", settings={**QUIET, "current_offset_ma": 75.0}),
     Claim("paper 001 §5, eq. 28, Fig. 4", "mean σ̂(i) with σ(i) = 1 mA, σ(v) = 15 mV", "matches 1 mA",
           "sigma_current_ma", (0.98, 1.02), "mA", "both phases, both gaps, 5000 periods each"),
     Claim("paper 001 §5, eq. 30, Fig. 5", "σ̂(L̂ᴵ) at 4 mm", "not given (lab: 25.7 µH)",
@@ -677,4 +587,37 @@ EXERCISE.claims = (
           "smaller for more samples and smaller T_s", "predicted_sigma_position_um.gap_1", _within(24.7, 0.03),
           "µm", "half the period: the same samples over half the ramp, σ doubles",
           settings={"sample_time_us": "0.5", "pwm_mode": PWM_MODES[1]}),
+    Claim("paper 001 after eq. 32 (design trade-off)", "σ̂(ŝ) at 4 mm with N = 900 turns (600 set)",
+          "large L: slow current", "predicted_sigma_position_um.gap_1", _within(24.78, 0.03), "µm",
+          "L/R grows 2.25× (12.6 → 28.3 ms) and, at the same σ(i), σ(ŝ) ∝ N² (σ(L̂) ∝ L²)",
+          settings={"turns": 900}),
+    Claim("paper 001 after eq. 32", "σ̂(ŝ) at 4 mm with A_s = 0.35 cm² (∂R_s/∂s doubled)",
+          "large ∂R_s/∂s: small σ(ŝ)", "predicted_sigma_position_um.gap_1", _within(23.2, 0.03), "µm",
+          "with the lab's leakage (R_s = 3 R_l at 4 mm) a larger ∂R_s/∂s diverts flux into the leakage path, "
+          "|∂L/∂s| falls and σ(ŝ) nearly doubles; eq. 32's factor alone holds L̄ fixed", deviation=True,
+          settings={"gap_area_cm2": 0.35}),
+    Claim("paper 001 after eq. 32", "σ̂(ŝ) at 4 mm with R_l = 6·10⁷ H⁻¹ (less leakage)", "not given",
+          "predicted_sigma_position_um.gap_1", _within(2.34, 0.03), "µm",
+          "5× smaller and a 2.3× faster coil: leakage costs both", settings={"leakage_reluctance": 6e7}),
+    Claim("lab (eq. 28-32 for straight ramps)", "simulated σ̂(ŝ) / straight-ramp σ(ŝ), A_s = 0.35 cm²",
+          "not given", "geometry.simulated_to_straight_ramp", (0.97, 1.03), "",
+          "the trade-off plots use the straight-ramp formula", settings={"gap_area_cm2": 0.35}),
+    Claim("lab target (paper 001's sensorless bearing, loop closed on ŝ)", "ball held at 4 mm on ŝ alone, "
+          "f_c = 6 Hz, σ(i) = 1 mA, σ(v) = 15 mV", "not given (the paper estimates, it does not levitate)",
+          "levitation.held_s", (LEVITATION_RUN_S - 0.01, None), "s",
+          "the whole run without leaving the reference by 1 mm", settings=LEVITATED, duration_s=LEVITATION_RUN_S),
+    Claim("lab target (loop on ŝ)", "true-gap std / prediction from the estimate's spread through the linear loop",
+          "not given", "levitation.gap_std_to_predicted", (0.8, 1.2), "",
+          "discrete Lyapunov equation of the loop linearised at 4 mm, fed the measured std of ŝ − s as white "
+          "noise; the first 0.1 s left out", settings=LEVITATED, duration_s=LEVITATION_RUN_S),
+    Claim("lab target (loop on ŝ)", "true-gap std / prediction from the estimator's own σ̂(ŝ) (eq. 32)",
+          "not given", "levitation.gap_std_to_eq32_prediction", (0.8, 1.35), "",
+          "wider than the row above: in the loop the spread of ŝ − s exceeds the mean σ̂(ŝ) by about 7 % (the "
+          "current and the ball change inside a period)", settings=LEVITATED, duration_s=LEVITATION_RUN_S),
+    Claim("lab target (loop on ŝ)", "largest f_c a noise-free run holds / the analysis's stability limit",
+          "not given (lab: limit 23.2 Hz at 4 mm)", "levitation.nonlinear_limit_to_predicted", (0.9, 1.1), "",
+          "bisection of 1 s runs between 0.8 and 1.2 × the limit; the limit from the loop with ŝ one period "
+          "old, averaged over it and the switching instant moved", settings=LEVITATED),
+    Claim("lab target (loop on ŝ)", "a run at 1.1 × the predicted limit stops with its message", "not given",
+          "levitation.stops_at_1_1_limit", (1.0, 1.0), "", "noise free, 1 s", settings=LEVITATED),
 )

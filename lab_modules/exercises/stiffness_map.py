@@ -317,6 +317,10 @@ class StiffnessMapSimulation:
     def status_message(self) -> str:
         return self.loop.status_message()
 
+    def filter_tape(self):
+        """The loop's record of its shown filter (``axial_bearing_loop.LoopSimulation.filter_tape``)."""
+        return self.loop.filter_tape()
+
 
 # -- plots --------------------------------------------------------------------------------------------
 

@@ -38,7 +38,9 @@ import scipy.linalg
 from numba import njit
 
 from lab_modules import analysis
+from lab_modules.estimators import scheduled_kalman
 from lab_modules.estimators.adaline import siso_step
+from lab_modules.estimators.filter_history import FilterModel, FilterTape
 from lab_modules.estimators.fuzzy_basis_network import CENTRES, evaluate
 from lab_modules.estimators.kalman import correction
 from lab_modules.estimators.scheduled_kalman import (
@@ -72,12 +74,15 @@ TOUCHDOWN_M = 1.5e-3                # retainer bearing at 0.5 mm from the magnet
 RK4_SUBSTEPS = 2
 FILTERS = ("fixed", "fbfnn", "lsm", "ekf")
 N_FILTERS = len(FILTERS)
+FILTER_NAMES = {"fixed": "fixed k_i, k_s (§B)", "fbfnn": "k_i, k_s scheduled by the FBFNN (§D)",
+                "lsm": "k_i, k_s scheduled by the LSM", "ekf": "EKF with the force law eq. 1"}
 
 COLUMNS = (
     "x_true_m", "x_measured_m", "x_reference_m", "current_a", "magnet_force_n", "disturbance_n",
     *[f"{f}_{q}" for f in FILTERS for q in ("x_m", "x_sigma_m", "force_n", "force_sigma_n")],
     "ki_tangent_n_per_a", "ks_tangent_n_per_m", "ki_fbfnn_n_per_a", "ks_fbfnn_n_per_m",
-    "ki_lsm_n_per_a", "ks_lsm_n_per_m", "k_magnet_estimate", "k_magnet_true",
+    "ki_lsm_n_per_a", "ks_lsm_n_per_m", "k_magnet_estimate", "k_magnet_true", "velocity_true_m_per_s",
+    "current_command_a",
 )
 COLUMN = {name: j + 1 for j, name in enumerate(COLUMNS)}      # row index 0 is time
 
@@ -138,6 +143,16 @@ class LoopSetup:
                         reference_filter_s=self.reference_filter_s,
                         feedforward_a=AXIAL.mass_kg * self.gravity / k_i,
                         feedback=-1 if self.feedback == "measured" else FILTERS.index(self.feedback))
+
+
+def scheduled_factors(setup: LoopSetup) -> dict:
+    """Per filter of ``FILTERS``: (i [A], x̂ [m]) -> (k_i [N/A], k_s [N/m]) of its model as ``run`` schedules
+    it (the EKF's: the tangent factors of its force law, eq. 3-4)."""
+    k_magnet, gap, bias = setup.filter_k_magnet, AXIAL.nominal_gap_m, AXIAL.bias_current_a
+    return {"fixed": lambda i, x: (4 * k_magnet * bias / gap**2, 4 * k_magnet * bias**2 / gap**3),
+            "fbfnn": lambda i, x: (evaluate(i, x, CENTRES, *setup.fbfnn_ki), evaluate(i, x, CENTRES, *setup.fbfnn_ks)),
+            "lsm": lambda i, x: lsm_factors_at(i, x, setup.stencil_a, setup.stencil_m, k_magnet, gap, bias),
+            "ekf": lambda i, x: tangent_factors(i, x, k_magnet, gap, bias)}
 
 
 # state vector layout
@@ -335,6 +350,7 @@ def run(n_steps, state, physics, schedule, pid, filters, identification, noise, 
         predict_exact_force(filter_z[3], filter_P[3], physics, command, A, B, Q)
         row[29] = state[S_ADALINE]
         row[30] = k_magnet * 1e6
+        row[31], row[32] = v, command
         # plant: RK4 over the sample, current held
         for _ in range(RK4_SUBSTEPS):
             d1 = _derivatives(x, v, xm, current, load, k_magnet, rig)
@@ -382,6 +398,12 @@ class LoopSimulation:
         self.identification = Identification(centres=CENTRES, ki_weights=ki_weights, ki_widths=ki_widths,
                                              ks_weights=ks_weights, ks_widths=ks_widths, stencil_a=setup.stencil_a,
                                              stencil_m=setup.stencil_m, adaline_rate=setup.adaline_rate)
+        shown = "fbfnn" if setup.feedback == "measured" else setup.feedback   # the filter ``filter_state`` shows
+        self.shown, sk = FILTERS.index(shown), scheduled_kalman
+        self.tape = FilterTape(FilterModel.propagated(
+            f"Kalman filter of the axial bearing (paper 002): {FILTER_NAMES[shown]}", SAMPLE_TIME_S, 1, sk.H,
+            np.full((N_STATES, N_STATES), np.nan), [setup.var_sensor_v2], sk.STATES, sk.MEASUREMENTS,
+            sk.propagation(self.physics, None if shown == "ekf" else scheduled_factors(setup)[shown]), sk.PREDICTION_LATEX))
 
     def retuned(self, setup: LoopSetup) -> LoopSimulation:
         """The same running loop with new settings (state, filters and noise stream kept)."""
@@ -399,11 +421,21 @@ class LoopSimulation:
             if self.setup.plant_force_walk_n2 > 0 else np.zeros(n_steps)])
         out = np.empty((n_steps, 1 + len(COLUMNS)))
         # a single step (the inspector's) keeps the filters' priors and the measurement for ``filter_state``
-        self._last_correction = ((self.filter_z.copy(), self.filter_P.copy(), self.state[S_XM] + noise[0, 0],
-                                  self.state[S_T]) if n_steps == 1 else None)
+        priors, first_sample = (self.filter_z.copy(), self.filter_P.copy()), round(self.state[S_T] / SAMPLE_TIME_S)
+        self._last_correction = (*priors, self.state[S_XM] + noise[0, 0], self.state[S_T]) if n_steps == 1 else None
         n = run(n_steps, self.state, self.physics, self.schedule, self.pid,
                 FilterBank(z=self.filter_z, P=self.filter_P), self.identification, noise, out)
-        return out[:n]
+        rows = out[:n]
+        y = column(rows, "x_measured_m") * SENSOR_GAIN_V_PER_M            # eq. 21: y = x_M + n
+        truth = np.column_stack([column(rows, "x_true_m"), column(rows, "velocity_true_m_per_s"),
+                                 column(rows, "disturbance_n"), y - noise[:n, 0]])
+        self.tape.record(first_sample, priors[0][self.shown], priors[1][self.shown], rows[:, 0],
+                         column(rows, "current_command_a"), y, truth)
+        return rows
+
+    def filter_tape(self) -> FilterTape:
+        """The record of the shown filter's inputs since the last launch or retune (``estimators.filter_history``)."""
+        return self.tape
 
     def filter_state(self) -> dict | None:
         """The filter the controller acts on (the FBFNN-scheduled one under measured feedback)
@@ -412,22 +444,16 @@ class LoopSimulation:
         if getattr(self, "_last_correction", None) is None:
             return None
         z_prior, P_prior, y, time_s = self._last_correction
-        which = FILTERS.index("fbfnn" if self.setup.feedback == "measured" else self.setup.feedback)
-        step = correction(z_prior[which], P_prior[which], [[0.0, 0.0, 0.0, 1.0]], [self.setup.var_sensor_v2], [y])
-        names = {"fixed": "fixed k_i, k_s (§B)", "fbfnn": "k_i, k_s scheduled by the FBFNN (§D)",
-                 "lsm": "k_i, k_s scheduled by the LSM", "ekf": "EKF with the force law eq. 1"}
-        return {"title": f"Kalman filter of the axial bearing (paper 002): {names[FILTERS[which]]}",
-                "time_s": float(time_s), "x": step["x"], "P": step["P"],
-                "states": (("position x", "m"), ("velocity v", "m/s"), ("disturbance force F_St", "N"),
-                           ("sensor state x_M", "V")),
-                "measurements": (("position sensor", "V"),), "K": step["K"], "innovation": step["innovation"],
+        model = self.tape.model
+        step = correction(z_prior[self.shown], P_prior[self.shown], model.H, [self.setup.var_sensor_v2], [y])
+        return {"title": model.title, "time_s": float(time_s), "x": step["x"], "P": step["P"], "states": model.states,
+                "measurements": model.measurements, "K": step["K"], "innovation": step["innovation"],
                 "innovation_sigma": np.sqrt(np.diag(step["S"]))}
 
     def status_message(self) -> str:
         if self.state[S_STOPPED] > 0:
             return f"Touchdown: the rotor reached the retainer bearing at ±{TOUCHDOWN_M * 1e3:g} mm."
         return ""
-
 
 
 # -- the loop linearised at the centre, broken at the plant input (margins, |S|max) ---------------
@@ -457,10 +483,7 @@ def loop_at_plant_input(setup: LoopSetup) -> control.StateSpace:
             return np.array([integral, derivative, position]), np.array([kp * (-position + integral / ti)
                                                                          - kd * derivative])
         return analysis.loop_at_plant_input(plant, analysis.state_space_from_step(step, 3, 1, T))
-    factors = {"fixed": (4 * physics[K_MAGNET] * bias / gap**2, 4 * physics[K_MAGNET] * bias**2 / gap**3),
-               "fbfnn": (evaluate(current, 0.0, CENTRES, *setup.fbfnn_ki), evaluate(current, 0.0, CENTRES, *setup.fbfnn_ks)),
-               "lsm": lsm_factors_at(current, 0.0, setup.stencil_a, setup.stencil_m, physics[K_MAGNET], gap, bias),
-               "ekf": tangent_factors(current, 0.0, physics[K_MAGNET], gap, bias)}[setup.feedback]
+    factors = scheduled_factors(setup)[setup.feedback](current, 0.0)
     A, B, Q = np.zeros((N_STATES, N_STATES)), np.zeros((N_STATES, 2)), np.zeros((N_STATES, N_STATES))
     model_matrices(float(factors[0]), float(factors[1]), physics, A, B)
     process_noise(physics, B, Q)

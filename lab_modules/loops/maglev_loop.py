@@ -31,7 +31,9 @@ from lab_modules import analysis
 from lab_modules.controllers.feedback_linearisation import GUARD_CURRENT_A, feedback_gain, linearising_control
 from lab_modules.controllers.lead_lag import LEAD_LAG, LeadLag
 from lab_modules.controllers.pid import DiscreteController, controller_step
+from lab_modules.estimators import continuous_discrete_ekf as cd
 from lab_modules.estimators.continuous_discrete_ekf import bucy_step, propagate, update
+from lab_modules.estimators.filter_history import FilterTape
 from lab_modules.estimators.kalman import correction
 from lab_modules.plants.maglev_ball import TABLE_3_1, MaglevPlant, rk4_step
 
@@ -310,6 +312,14 @@ class MaglevSimulation:
         self.status = OK
         self.guarded_steps = 0                        # controller steps clamped by the singularity guard
         self._last_correction = None                   # (prior x̂, prior P, y, time) of the last sample
+        self.filter_title = f"{setup.filter} EKF of the maglev ball (paper 004 §2.5)"
+        self.tape = None if setup.filter != FILTERS[0] else FilterTape(cd.history_model(
+            self.filter_title, self.sample_time_s, self.constants, setup.filter_Q, setup.sensor_noise_m**2,
+            setup.filter_substeps, fixed_interval=True))
+
+    def filter_tape(self) -> FilterTape | None:
+        """The continuous-discrete filter's record (``estimators.filter_history``); None: it corrects continuously."""
+        return self.tape
 
     def advance(self, n_steps: int) -> np.ndarray:
         if self.status != OK or n_steps <= 0:
@@ -322,13 +332,14 @@ class MaglevSimulation:
             return run(last - first, (self.steps + first) * self.sample_time_s, self.sample_time_s, self._ball,
                        self._filter, self._control, refs[first:last], noise[first:last], trace[first:last])
 
-        if n_steps == 1:                               # a single step (the inspector's) keeps the prior
-            prior = self.x_hat.copy(), self.P.copy()
-            done, self.status = part(0, 1)
-            self._last_correction = (*prior, np.array([trace[0, 1 + COLUMN["x_measured_m"]]]), trace[0, 0])
-        else:
-            done, self.status = part(0, n_steps)
-            self._last_correction = None
+        prior = self.x_hat.copy(), self.P.copy()
+        done, self.status = part(0, n_steps)
+        rows = trace[:done]
+        y = rows[:, 1 + COLUMN["x_measured_m"]]
+        self._last_correction = (*prior, y[:1], rows[0, 0]) if n_steps == 1 else None   # the inspector's step
+        if self.tape is not None:
+            truth = rows[:, [1 + COLUMN[name] for name in ("x_true_m", "velocity_true_m_per_s", "current_true_a")]]
+            self.tape.record(self.steps, *prior, rows[:, 0], rows[:, 1 + COLUMN["coil_voltage_v"]], y, truth)
         self.steps += done
         self.guarded_steps += int(np.sum(trace[:done, 1 + COLUMN["guarded"]]))
         return trace[:done]
@@ -340,9 +351,8 @@ class MaglevSimulation:
         if self._last_correction is None:
             return None
         x_prior, P_prior, y, time_s = self._last_correction
-        state = {"title": f"{self.setup.filter} EKF of the maglev ball (paper 004 §2.5)", "time_s": float(time_s),
-                 "states": (("air gap x₁", "m"), ("ball velocity x₂", "m/s"), ("coil current x₃", "A")),
-                 "measurements": (("position sensor", "m"),)}
+        state = {"title": self.filter_title, "time_s": float(time_s), "states": cd.STATES,
+                 "measurements": cd.MEASUREMENTS}
         if self.setup.filter != FILTERS[0]:
             return {**state, "x": self.x_hat.copy(), "P": self.P.copy(), "K": None, "innovation": None,
                     "innovation_sigma": None}

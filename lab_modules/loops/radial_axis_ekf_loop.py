@@ -34,11 +34,13 @@ from lab_modules import analysis
 from lab_modules.controllers.pid import DiscreteController, controller_step
 from lab_modules.estimators import extended_kalman as ef
 from lab_modules.estimators.extended_kalman import N_STATES
+from lab_modules.estimators.filter_history import FilterModel, FilterTape
 from lab_modules.estimators.kalman import correction
 from lab_modules.loops.radial_axis_loop import Inputs, Noise, Rotor, rk4_step
 from lab_modules.plants.radial_bearing import RIG, BearingAxis
 
 OK, DIVERGED, TOUCHDOWN, FILTER_DIVERGED = 0, 1, 2, 3
+MEASUREMENTS = (("position sensor", "V"), ("current sensor", "V"))
 
 #: Columns of the trace written by ``run``.  ``*_true_*`` are the plant's:
 #: k_x, k_i the analytic derivatives of eq. 10 at the true (x, i).  The
@@ -48,7 +50,7 @@ OK, DIVERGED, TOUCHDOWN, FILTER_DIVERGED = 0, 1, 2, 3
 TRACE_COLUMNS = ("x_true_m", "x_measured_m", "x_estimated_m", "x_sigma_m", "current_a",
                  "current_reference_v", "reference_m", "force_true_n", "force_estimated_n",
                  "force_sigma_n", "kx_true_n_per_m", "kx_estimated_n_per_m", "kx_sigma_n_per_m",
-                 "ki_true_n_per_a", "ki_estimated_n_per_a", "ki_sigma_n_per_a", "nis")
+                 "ki_true_n_per_a", "ki_estimated_n_per_a", "ki_sigma_n_per_a", "nis", "velocity_true_m_per_s")
 
 
 class ExtendedFilter(NamedTuple):
@@ -119,7 +121,7 @@ def run(n_steps, rotor, ekf, controller, feedback, inputs, noise, trace):
         row[3], row[4], row[5] = np.sqrt(max(P[0, 0], 0.0)), plant[2], u
         row[6], row[7] = reference_m[k], disturbance_n[k]
         row[10], row[13] = ef.local_factors(plant[0], plant[2], plant_physics)
-        row[16] = nis
+        row[16], row[17] = nis, plant[1]
         if model == ef.NONLINEAR:
             row[8], row[9] = x_hat[4], np.sqrt(max(P[4, 4], 0.0))
         else:
@@ -288,6 +290,9 @@ class EKFLoopSimulation:
         self.step = 0
         self.status = OK
         self._last_correction = None                   # (prior x̂, prior P, y, time) of the last sample
+        self.tape = FilterTape(FilterModel.propagated(
+            self.title(), rig.sample_time_s, 1, self._C, self._Q, self._R_diag, self.states(), MEASUREMENTS,
+            ef.propagation(setup.model, self._Q, self._filter_physics), ef.PREDICTION_LATEX))
 
     def retuned(self, setup: EKFLoopSetup) -> EKFLoopSimulation:
         """A simulation with new settings that carries on from this one's state
@@ -333,19 +338,40 @@ class EKFLoopSimulation:
                        Inputs(reference_m=reference[first:last], disturbance_n=disturbance[first:last]),
                        Noise(draws=noise[first:last], sigma=setup.noise_sigma), trace[first:last])
 
-        if n_steps == 1:                               # a single step (the inspector's) keeps the prior
-            prior, plant = (self.x_hat.copy(), self.P.copy()), self.plant.copy()
-            status, done = part(0, 1)
-            K_mx, K_mi = self._plant_physics[9], self._plant_physics[10]
-            y = np.array([K_mx * plant[3] + setup.noise_sigma[2] * noise[0, 2],
-                          K_mi * plant[2] + setup.noise_sigma[3] * noise[0, 3]])
-            self._last_correction = (*prior, y, t[0])
-        else:
-            status, done = part(0, n_steps)
-            self._last_correction = None
+        prior = self.x_hat.copy(), self.P.copy()
+        status, done = part(0, n_steps)
+        trace = trace[:done]
+        # eq. 14, 16: the measured position (as traced) and the true current plus the sensor's noise
+        y = np.column_stack([trace[:, 1] * self._plant_physics[9],
+                             self._plant_physics[10] * trace[:, 4] + setup.noise_sigma[3] * noise[:done, 3]])
+        # a single step (the inspector's) keeps the prior
+        self._last_correction = (*prior, y[0], t[0]) if n_steps == 1 else None
+        self.tape.record(self.step, *prior, t[:done], trace[:, 5], y, self.true_states(trace))
         self.step += done
         self.status = status
-        return np.column_stack([t[:done], trace[:done]])
+        return np.column_stack([t[:done], trace])
+
+    def true_states(self, trace: np.ndarray) -> np.ndarray:
+        """The filter's states as the plant has them, per trace row (NaN: the lagged sensor's x_d,
+        not traced): (x, v, i, k_i, k_x) of eq. 10 at the true (x, i), or (x, v, i, x_d, f_z)."""
+        names = ("x_true_m", "velocity_true_m_per_s", "current_a") + (
+            ("ki_true_n_per_a", "kx_true_n_per_m") if self.setup.model == ef.LINEARISED else ("", "force_true_n"))
+        return np.column_stack([trace[:, TRACE_COLUMNS.index(name)] if name else np.full(len(trace), np.nan)
+                                for name in names])
+
+    def filter_tape(self) -> FilterTape:
+        """The record of the filter's inputs since the last launch or retune (``estimators.filter_history``)."""
+        return self.tape
+
+    def title(self) -> str:
+        return ("Extended Kalman filter, disturbance model (paper 000 §III-B)" if self.setup.model == ef.NONLINEAR
+                else "Extended Kalman filter, parameter model (paper 000 §III-A)")
+
+    def states(self) -> tuple[tuple[str, str], ...]:
+        """(label, SI unit) of the filter's five states (eq. 8 or eq. 13)."""
+        return (("position x", "m"), ("velocity v", "m/s"), ("coil current i", "A")) + (
+            (("sensed position x_d (lag)", "m"), ("disturbance force f_z", "N")) if self.setup.model == ef.NONLINEAR
+            else (("current factor k_i", "N/A"), ("force-displacement factor k_x", "N/m")))
 
     def filter_state(self) -> dict | None:
         """The EKF at the sample of the last advance(1): corrected x̂ and P, gain K, innovation and √S
@@ -354,15 +380,8 @@ class EKFLoopSimulation:
             return None
         x_prior, P_prior, y, time_s = self._last_correction
         step = correction(x_prior, P_prior, self._C, self._R_diag, y)
-        nonlinear = self.setup.model == ef.NONLINEAR
-        states = (("position x", "m"), ("velocity v", "m/s"), ("coil current i", "A")) + (
-            (("sensed position x_d (lag)", "m"), ("disturbance force f_z", "N")) if nonlinear else
-            (("current factor k_i", "N/A"), ("force-displacement factor k_x", "N/m")))
-        return {"title": ("Extended Kalman filter, disturbance model (paper 000 §III-B)" if nonlinear else
-                          "Extended Kalman filter, parameter model (paper 000 §III-A)"),
-                "time_s": float(time_s), "states": states, "x": step["x"], "P": step["P"],
-                "measurements": (("position sensor", "V"), ("current sensor", "V")),
-                "K": step["K"], "innovation": step["innovation"], "innovation_sigma": np.sqrt(np.diag(step["S"]))}
+        return {"title": self.title(), "time_s": float(time_s), "states": self.states(), "x": step["x"],
+                "P": step["P"], "measurements": MEASUREMENTS, "K": step["K"], "innovation": step["innovation"], "innovation_sigma": np.sqrt(np.diag(step["S"]))}
 
     def status_message(self) -> str:
         """'' while running; what stopped the simulation otherwise."""

@@ -17,6 +17,7 @@ import scipy.signal
 
 from lab_modules import analysis
 from lab_modules.controllers.pid import DiscreteController
+from lab_modules.estimators.filter_history import FilterModel, FilterTape
 from lab_modules.estimators.kalman import KalmanFilter, correction, pad_vector
 from lab_modules.loops import radial_axis_loop
 from lab_modules.plants.radial_bearing import RIG, BearingAxis
@@ -25,6 +26,9 @@ from lab_modules.plants.radial_bearing import RIG, BearingAxis
 FILTER_FIELDS = {"rig", "sensor_lag_s", "sensor_noise_m", "current_noise_a", "process_force_n",
                  "process_current_a", "filter_q_velocity", "filter_q_current", "filter_r_position",
                  "filter_r_current"}
+
+FILTER_TITLE = "Linear Kalman filter (paper 000, eq. 2)"
+MEASUREMENTS = (("position sensor", "V"), ("current sensor", "V"))
 
 
 @dataclass(frozen=True)
@@ -211,6 +215,8 @@ class AxisSimulation:
         self.step = 0
         self.status = radial_axis_loop.OK
         self._last_correction = None                   # (prior x̂, prior P, y, time) of the last sample
+        self.tape = FilterTape(FilterModel.of_filter(self.filter, FILTER_TITLE, rig.sample_time_s,
+                                                     self.STATE_LABELS[:n], MEASUREMENTS))
         self._reference_filter = None                  # (numerator, denominator, filter state)
         if setup.reference_filter is not None:
             transfer = control.ss2tf(setup.reference_filter)
@@ -282,18 +288,28 @@ class AxisSimulation:
                 radial_axis_loop.Inputs(reference_m=reference[first:last], disturbance_n=disturbance[first:last]),
                 radial_axis_loop.Noise(draws=noise[first:last], sigma=setup.noise_sigma), trace[first:last])
 
-        if n_steps == 1:                               # a single step (the inspector's) keeps the prior
-            prior = kf.state.copy(), kf.P.copy()
-            status, done = run(0, 1)
-            sigma, row = self.setup.noise_sigma, trace[0]
-            self._last_correction = (*prior, np.array([row[2] * self.physics[9], row[5] * self.physics[10]
-                                                       + sigma[3] * float(noise[0, 3])]), row[0])
-        else:
-            status, done = run(0, n_steps)
-            self._last_correction = None
+        prior = kf.state.copy(), kf.P.copy()
+        status, done = run(0, n_steps)
+        y = self.measurements(trace[:done], noise[:done])
+        # a single step (the inspector's) keeps the prior
+        self._last_correction = (*prior, y[0], trace[0, 0]) if n_steps == 1 else None
+        column = {name: 1 + j for j, name in enumerate(radial_axis_loop.TRACE_COLUMNS)}
+        truth = np.full((done, kf.dim_x), np.nan)      # the lagged sensor's state x_d is not traced
+        truth[:, :3] = trace[:done, [column["x_true_m"], column["velocity_true_m_per_s"], column["current_a"]]]
+        self.tape.record(self.step, *prior, trace[:done, 0], trace[:done, column["current_reference_v"]], y, truth)
         self.step += done
         self.status = status
         return trace[:done]
+
+    def measurements(self, trace: np.ndarray, noise: np.ndarray) -> np.ndarray:
+        """The filter's measurements y (N, 2) [V] of these trace rows and noise draws (eq. 1: the
+        traced measured position, the true current plus the current sensor's noise)."""
+        return np.column_stack([trace[:, 2] * self.physics[9],
+                                trace[:, 5] * self.physics[10] + self.setup.noise_sigma[3] * noise[:, 3]])
+
+    def filter_tape(self) -> FilterTape:
+        """The record of the filter's inputs (``estimators.filter_history``): the filter debugger's."""
+        return self.tape
 
     STATE_LABELS = (("position x", "m"), ("velocity v", "m/s"), ("coil current i", "A"),
                     ("sensed position x_d (lag)", "m"))
@@ -306,10 +322,9 @@ class AxisSimulation:
         x_prior, P_prior, y, time_s = self._last_correction
         n, kf = self.filter.dim_x, self.filter
         step = correction(x_prior[:n], P_prior[:n, :n], kf.C[:, :n], kf.R_diag, y)
-        return {"title": "Linear Kalman filter (paper 000, eq. 2)", "time_s": float(time_s),
+        return {"title": FILTER_TITLE, "time_s": float(time_s),
                 "states": self.STATE_LABELS[:n], "x": step["x"], "P": step["P"],
-                "measurements": (("position sensor", "V"), ("current sensor", "V")),
-                "K": step["K"], "innovation": step["innovation"],
+                "measurements": MEASUREMENTS, "K": step["K"], "innovation": step["innovation"],
                 "innovation_sigma": np.sqrt(np.diag(step["S"]))}
 
     def noise(self, n_steps: int) -> np.ndarray:

@@ -47,6 +47,10 @@ class SideBySide:
         state = simulation.filter_state()
         return state and {**state, "title": f"{name} loop: {state['title']}"}
 
+    def filter_tape(self):
+        """The first loop's filter record (the one the inspector shows)."""
+        return next(iter(self.simulations.values())).filter_tape()
+
     def status_message(self) -> str:
         return " ".join(f"{name} loop: {sim.status_message()}"
                         for name, sim in self.simulations.items() if sim.status != OK)

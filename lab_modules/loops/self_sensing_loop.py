@@ -42,7 +42,8 @@ COLUMNS = (
     "sigma_current_1_a", "sigma_current_2_a", "sigma_inductance_1_h", "sigma_inductance_2_h",
     "sigma_inductance_mean_h", "gap_estimated_m", "sigma_gap_m", "delta_current_1_a", "delta_current_2_a",
     "weight_1", "weight_2", "mean_current_1_a", "mean_current_2_a", "current_mean_true_a",
-    "inductance_1_true_h", "inductance_2_true_h",
+    "inductance_1_true_h", "inductance_2_true_h", "gap_reference_m", "gap_fed_back_m", "current_command_a",
+    "velocity_m_s",
 )
 COLUMN = {name: k for k, name in enumerate(COLUMNS)}
 TRAJECTORIES = ("4-6-4 mm", "fixed at gap 1", "fixed at gap 2")
@@ -149,7 +150,6 @@ def run_periods(first_period, n_periods, flux, constants, setup, rng_state, out,
     ts = setup.sample_time_s
     v_bat = setup.battery_voltage_v
     r = setup.resistance_ohm
-    r_hat = setup.resistance_estimate_ohm
     mu = setup.current_gain
     eta = setup.voltage_gain
     di = setup.current_offset_a
@@ -162,14 +162,12 @@ def run_periods(first_period, n_periods, flux, constants, setup, rng_state, out,
     transition = setup.transition_s
     mode = setup.trajectory
     weight = setup.ball_mass_kg * GRAVITY
-    dof_sign = setup.dof_sign
     hold = setup.hold_s
     period_s = n * ts
     current_m = np.empty(n + 1)
     voltage_m = np.empty(n + 1)
     fit_1 = np.empty(7)
     fit_2 = np.empty(7)
-    raw_rows = raw.shape[0]
     noise = np.empty(2 * n + 2)
     true_i = np.empty(n)
     inv_mu = 1.0 / mu
@@ -184,13 +182,7 @@ def run_periods(first_period, n_periods, flux, constants, setup, rng_state, out,
         # duty: the mean current of this period is the equilibrium current at its end.
         # Triangle: mean = start current + Δi/2, so aim the end current at i_eq − Δi/2.
         i_eq = np.sqrt(2.0 * weight / abs(inductance_slope(gap_end, constants)))
-        chi_0 = 0.5 * (1.0 + r * i_eq / v_bat)
-        ripple = (v_bat - r * i_eq) * chi_0 * period_s / l1
-        i_end = i_eq - 0.5 * ripple
-        i_start = flux / l0
-        needed = l1 * i_end - flux                      # ∫(v − R i) dt over the period
-        mean_current = 0.5 * (i_start + i_end) + 0.5 * ripple
-        chi = 0.5 * (1.0 + (needed / period_s + r * mean_current) / v_bat)
+        chi = duty_for_mean_current(flux / l0, l0, i_eq, l1, r, v_bat, period_s)
         n_on = int(np.rint(chi * n))
         n_on = max(min_on, min(n - min_on, n_on))
         # Quadratic interpolation of L(t) through the start, middle and end of the period.
@@ -222,39 +214,77 @@ def run_periods(first_period, n_periods, flux, constants, setup, rng_state, out,
             a = r * ts / (l0 + xm * (a1 + 0.5 * a2 * xm))
             step = ts * (1.0 - a * (0.5 - a * (1.0 / 6.0 - a / 24.0)))      # (1 − e^(−a)) L / R, frozen L
             flux = flux * (1.0 - a * step / ts) + v * step
-        for k in range(min(n, raw_rows - p * n)):
-            raw[p * n + k, 0] = t0 + k * ts
-            raw[p * n + k, 1] = true_i[k]
-            raw[p * n + k, 2] = current_m[k]
-            raw[p * n + k, 3] = voltage_m[k]
-            raw[p * n + k, 4] = v_bat if k < n_on else -v_bat
-        fit_half_period(current_m, voltage_m, trim, n_on - trim, r_hat, ts, dof_sign, fit_1)
-        fit_half_period(current_m, voltage_m, n_on + trim, n - trim, r_hat, ts, dof_sign, fit_2)
-        l_bar, var_bar, w_1, w_2 = average(fit_1, fit_2)
+        store_raw(raw, p, t0, ts, true_i, current_m, voltage_m, n_on, v_bat)
         row = out[p]
+        estimate_period(current_m, voltage_m, n_on, setup, constants, fit_1, fit_2, row)
         row[0] = gap_at(t0 + 0.5 * period_s, gap_1, gap_2, hold, transition, mode)
         row[1] = l_sum / n
-        row[2] = n_on / n
-        row[3] = fit_1[0]
-        row[4] = fit_2[0]
-        row[5] = l_bar
-        row[6] = np.sqrt(fit_1[2])
-        row[7] = np.sqrt(fit_2[2])
-        row[8] = np.sqrt(fit_1[1])
-        row[9] = np.sqrt(fit_2[1])
-        row[10] = np.sqrt(var_bar)
-        row[11] = gap_from_inductance(l_bar, constants)
-        row[12] = position_sensitivity(l_bar, constants) * row[10]
-        row[13] = fit_1[3]
-        row[14] = fit_2[3]
-        row[15] = w_1
-        row[16] = w_2
-        row[17] = fit_1[4]
-        row[18] = fit_2[4]
         row[19] = np.mean(true_i)
         row[20] = l_1_sum / (n_on - 2 * trim + 1)
         row[21] = l_2_sum / (n - n_on - 2 * trim + 1)
+        row[22] = row[0]
+        row[23] = np.nan                                # no position feedback
+        row[24] = i_eq
+        row[25] = (gap_end - gap_at(t0, gap_1, gap_2, hold, transition, mode)) / period_s
     return flux
+
+
+@njit(cache=True, nogil=True)
+def duty_for_mean_current(current_start_a, inductance_start_h, target_a, inductance_end_h, resistance_ohm,
+                          battery_voltage_v, period_s):
+    """The duty χ whose period has the mean current ``target_a`` [A], from the current and
+    inductance at its start and the inductance at its end [H] (a one-period dead-beat on the flux).
+    Triangle: mean = start current + Δi/2, so the end current aims at target − Δi/2 and
+    ∫(v − R i) dt = (2χ − 1) v_bat T − R ī T is the flux the period must add."""
+    chi_0 = 0.5 * (1.0 + resistance_ohm * target_a / battery_voltage_v)
+    ripple = (battery_voltage_v - resistance_ohm * target_a) * chi_0 * period_s / inductance_end_h
+    i_end = target_a - 0.5 * ripple
+    needed = inductance_end_h * i_end - inductance_start_h * current_start_a     # ∫(v − R i) dt [Wb]
+    mean_current = 0.5 * (current_start_a + i_end) + 0.5 * ripple
+    return 0.5 * (1.0 + (needed / period_s + resistance_ohm * mean_current) / battery_voltage_v)
+
+
+@njit(cache=True, nogil=True)
+def store_raw(raw, p, t0, sample_time_s, true_i, current_m, voltage_m, n_on, battery_voltage_v):
+    """The samples of period ``p`` (of n = len(true_i)) into the rows of ``raw`` that have room:
+    time [s], true current [A], measured current [A], measured voltage [V], applied voltage [V]."""
+    n = true_i.size
+    for k in range(min(n, raw.shape[0] - p * n)):
+        raw[p * n + k, 0] = t0 + k * sample_time_s
+        raw[p * n + k, 1] = true_i[k]
+        raw[p * n + k, 2] = current_m[k]
+        raw[p * n + k, 3] = voltage_m[k]
+        raw[p * n + k, 4] = battery_voltage_v if k < n_on else -battery_voltage_v
+
+
+@njit(cache=True, nogil=True)
+def estimate_period(current_m, voltage_m, n_on, setup, constants, fit_1, fit_2, row):
+    """The estimator's columns of one period's row (duty, eq. 7-10 and 28-30 per phase, eq. 18
+    and 31, eq. 2 and 32) from its measured samples (n + 1, the last one the next period's first)."""
+    n = setup.samples_per_period
+    trim = setup.trim_samples
+    r_hat = setup.resistance_estimate_ohm
+    ts = setup.sample_time_s
+    fit_half_period(current_m, voltage_m, trim, n_on - trim, r_hat, ts, setup.dof_sign, fit_1)
+    fit_half_period(current_m, voltage_m, n_on + trim, n - trim, r_hat, ts, setup.dof_sign, fit_2)
+    l_bar, var_bar, w_1, w_2 = average(fit_1, fit_2)
+    row[2] = n_on / n
+    row[3] = fit_1[0]
+    row[4] = fit_2[0]
+    row[5] = l_bar
+    row[6] = np.sqrt(fit_1[2])
+    row[7] = np.sqrt(fit_2[2])
+    row[8] = np.sqrt(fit_1[1])
+    row[9] = np.sqrt(fit_2[1])
+    row[10] = np.sqrt(var_bar)
+    row[11] = gap_from_inductance(l_bar, constants)
+    row[12] = position_sensitivity(l_bar, constants) * row[10]
+    row[13] = fit_1[3]
+    row[14] = fit_2[3]
+    row[15] = w_1
+    row[16] = w_2
+    row[17] = fit_1[4]
+    row[18] = fit_2[4]
 
 
 @dataclass(frozen=True)
@@ -309,6 +339,7 @@ class SelfSensingLoop:
         self.pwm_run = setup.pwm_run()
         self.rng_state = np.random.default_rng(seed).integers(1, 2**63, 4, dtype=np.uint64)
         self.period = 0
+        self.stop_message = ""          # a prescribed motion never stops
         gap = gap_at(0.0, setup.gap_1_m, setup.gap_2_m, HOLD_S, setup.transition_s,
                      TRAJECTORIES.index(setup.trajectory))
         # start in the periodic steady state of the first period's duty: the bottom of the ripple

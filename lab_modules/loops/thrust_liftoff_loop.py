@@ -38,6 +38,7 @@ import scipy.linalg
 import scipy.signal
 
 from lab_modules import analysis
+from lab_modules.estimators.filter_history import FilterModel, FilterTape
 from lab_modules.estimators.kalman import STATE_SIZE, correction, predict, update
 from lab_modules.estimators.thrust_kalman import H, ThrustFilterDesign
 from lab_modules.plants.thrust_bearing import GRAVITY_M_PER_S2, TABLE_1, ThrustBearing, discrete_current_loop
@@ -49,6 +50,9 @@ JIT = {"nogil": True, "cache": True, "error_model": "numpy"}
 KERNEL_COLUMNS = ("x_true_m", "x_measured_m", "x_estimated_m", "x_sigma_m", "velocity_true_m_per_s",
                   "velocity_estimated_m_per_s", "current_command_a", "current_a", "kalman_gain_x",
                   "estimation_error_m")
+FILTER_TITLE = "Kalman filter of the thrust bearing (paper 003 §3)"
+STATES = (("collar position x", "m"), ("collar velocity v", "m/s"))
+MEASUREMENTS = (("position sensor Z", "m"),)
 #: Constant columns the simulation adds (lines on the scope).
 LINE_COLUMNS = ("touchdown_upper_m", "touchdown_lower_m", "current_limit_a", "current_limit_negative_a", "zero")
 TRACE_COLUMNS = KERNEL_COLUMNS + LINE_COLUMNS
@@ -250,10 +254,12 @@ class ThrustSetup:
     start_position_m: float = -0.75e-3
     sensor_noise_correlation_s: float = 0.0        # > 0: first-order coloured sensor noise (std stays σ_v)
     noise_on: bool = True                          # False: the same run without any noise draws
+    filter_exact_model: bool = False               # True: the filter on the exact ZOH matrices, not eq. 9-11
 
     @property
     def design(self) -> ThrustFilterDesign:
-        return ThrustFilterDesign(self.filter_q_n2, self.filter_r_factor * self.sensor_noise_m**2, self.bearing)
+        return ThrustFilterDesign(self.filter_q_n2, self.filter_r_factor * self.sensor_noise_m**2, self.bearing,
+                                  self.filter_exact_model)
 
     @property
     def gravity_n(self) -> float:
@@ -306,6 +312,7 @@ class ThrustSimulation:
         G_A, G_B, G_C, G_D = self._current
         self._current_loop = CurrentLoop(active=s.current_loop, state=self.coil, A=G_A, B=G_B, C=G_C, D=G_D)
         self._kalman = kf.arrays()
+        self.tape = FilterTape(FilterModel.of_filter(kf, FILTER_TITLE, b.sample_time_s, STATES, MEASUREMENTS))
         self._pid = LiftoffPID(state=self.pid, proportional_a_per_m=s.proportional_a_per_m,
                                integral_a_per_m_s=s.integral_a_per_m_s, derivative_a_s_per_m=s.derivative_a_s_per_m,
                                derivative_filter=self._derivative_filter, current_limit_a=s.current_limit_a,
@@ -363,14 +370,14 @@ class ThrustSimulation:
                        self._kalman, self._pid, LiftoffNoise(draws=noise[first:last], sigma=self._sigma),
                        trace[first:last])
 
-        if n_steps == 1:                               # a single step (the inspector's) keeps the prior
-            prior = kf.state.copy(), kf.P.copy()
-            y = np.array([self.plant[0] + self._sigma[0] * noise[0, 0]])     # eq. 13: Z = x + V
-            status, done = part(0, 1)
-            self._last_correction = (*prior, y, trace[0, 0])
-        else:
-            status, done = part(0, n_steps)
-            self._last_correction = None
+        prior = kf.state.copy(), kf.P.copy()
+        status, done = part(0, n_steps)
+        z = trace[:done, 1 + KERNEL_COLUMNS.index("x_measured_m")]            # eq. 13: Z = x + V
+        # a single step (the inspector's) keeps the prior
+        self._last_correction = (*prior, z[:1], trace[0, 0]) if n_steps == 1 else None
+        truth = trace[:done, [1 + KERNEL_COLUMNS.index(c) for c in ("x_true_m", "velocity_true_m_per_s")]]
+        self.tape.record(self.step, *prior, trace[:done, 0], trace[:done, 1 + KERNEL_COLUMNS.index("current_a")],
+                         z, truth)
         trace[:done, 1 + len(KERNEL_COLUMNS):] = self._lines
         self.step += done
         self.status = status
@@ -395,10 +402,13 @@ class ThrustSimulation:
         kf = self.filter
         n = kf.dim_x
         step = correction(x_prior[:n], P_prior[:n, :n], kf.C[:, :n], kf.R_diag, y)
-        return {"title": "Kalman filter of the thrust bearing (paper 003 §3)", "time_s": float(time_s),
-                "states": (("collar position x", "m"), ("collar velocity v", "m/s")), "x": step["x"],
-                "P": step["P"], "measurements": (("position sensor Z", "m"),), "K": step["K"],
+        return {"title": FILTER_TITLE, "time_s": float(time_s), "states": STATES, "x": step["x"],
+                "P": step["P"], "measurements": MEASUREMENTS, "K": step["K"],
                 "innovation": step["innovation"], "innovation_sigma": np.sqrt(np.diag(step["S"]))}
+
+    def filter_tape(self) -> FilterTape:
+        """The record of the filter's inputs since the last launch or retune (``estimators.filter_history``)."""
+        return self.tape
 
     def run(self, duration_s: float) -> dict[str, np.ndarray]:
         """``duration_s`` of simulation as columns (and ``time_s``)."""
