@@ -31,6 +31,13 @@ TIME_AXES = ("time before now", "time since reset")
 SINCE_RESET = TIME_AXES[1]
 
 
+def time_axis_choice(gui, initial: str):
+    """The Scope tab's "Time axis" dropdown: the time before now (rolling) or the time since reset."""
+    return gui.add_dropdown("Time axis", TIME_AXES, initial_value=initial,
+                            hint="Time before the newest sample (rolling), or the time since Reset, one window "
+                                 "after the other (to read when something happened in the run).")
+
+
 class ScopeCharts:
     """The scope charts of one generation of an exercise, in the Scope tab."""
 

@@ -44,7 +44,7 @@ from app.panels.inspector import FilterInspector
 from app.panels.live import LivePlots
 from app.panels.plots import plot_chart
 from app.panels.scene_view import SceneView
-from app.panels.scope_charts import TIME_AXES, ScopeCharts
+from app.panels.scope_charts import TIME_AXES, ScopeCharts, time_axis_choice
 from app.panels.status import PAUSED, RUNNING, SimulationStatus, stopped
 from app.panels.text import escaped
 from app.tab.analysis_view import AnalysisView
@@ -335,10 +335,7 @@ class LabSession:
         with tabs["Scope"]:
             self.analysis.add_pinned(gui)              # first: in view at 1366 x 768 above any live plot
             live = LivePlots(gui, exercise, self.state.simulation)   # if the exercise has any
-            time_axis = gui.add_dropdown("Time axis", TIME_AXES, initial_value=self.time_axis,
-                                         hint="Time before the newest sample (rolling), or the time since "
-                                              "Reset, one window after the other (to read when something "
-                                              "happened in the run).")
+            time_axis = time_axis_choice(gui, self.time_axis)
             charts = ScopeCharts(gui, exercise.charts, self.state.columns, self.state.window_ms(), self.time_axis)
             time_axis.on_update(on("time axis", lambda: self._set_time_axis(charts, time_axis.value)))
             self.analysis.add_readouts(gui)
@@ -378,13 +375,11 @@ class LabSession:
                 self.stream.draw(time.perf_counter())   # also while paused
 
     def _fit_scene(self, attached: bool = False) -> None:
-        """Fold the 3D view away while the window leaves it no room (issue 25: at 1024 x 768 it was a
-        cut-off 120 px strip), show it again once there is (``attached``: its scene is new)."""
-        if self.scene is None:
-            return
-        camera = self.client.camera
+        """Fold the 3D view away while the window leaves it no room (a cut-off strip at 1024 x 768), show
+        it again once there is (``attached``: its scene is new)."""
         with self.gui_lock:
-            if not self.closed:
+            if self.scene is not None and not self.closed:
+                camera = self.client.camera
                 self.scene_view.fit(self.client.scene, camera.image_width, camera.image_height, attached)
 
     def _still_current(self) -> Callable[[], bool]:
@@ -411,13 +406,8 @@ class LabSession:
             return
         self._request_analysis()                  # readouts first: they are what the student watches
         with lab.lock:
-            # a stopped run is not carried on (it touched down), and a run the change invalidates
-            # (a new seed, a replay of other filter settings) starts again, also when it was paused
-            restart = parameter.name == "seed" or lab.exercise.restarts_on_change \
-                or bool(lab.simulation.status_message())
-            if restart:
-                lab.restart()
-            else:
+            restart = lab.restart_after(parameter.name)
+            if not restart:
                 step_s = lab.simulation.sample_time_s
                 lab.simulation = lab.exercise.retune(lab.simulation, lab.values)
                 if lab.simulation.sample_time_s != step_s:
@@ -440,7 +430,7 @@ class LabSession:
             named = str(error) if uploaded.name in str(error) else f"{uploaded.name}: {error}"
             self.upload_note.content = f"⚠️ Not loaded: {escaped(named)}"
             return
-        rows = f" {len(data)} rows;" if hasattr(data, "__len__") else ""
+        rows = f" {len(data)} rows;" if hasattr(data, "__len__") else ""   # a recording's
         self.upload_note.content = f"✓ Loaded {escaped(uploaded.name)}.{rows} the run starts again with it."
         with lab.lock:
             lab.values["data"] = data
@@ -452,14 +442,9 @@ class LabSession:
         self._request_analysis()
 
     def _show_restarted(self) -> None:
-        """The status line after a change restarted the run: running again, the stop card gone."""
         with self.gui_lock:
-            if self.closed:
-                return
-            if not self.stream.alive():
-                self.stream.start()               # never left without a simulation
-            self.status.clear_card()
-            self.status.line.content = RUNNING
+            if not self.closed:
+                self.stream.show_restarted()
 
     def _on_download(self) -> None:
         """Make the file; the note under the button says what happened (issue 11, defect 5: the
