@@ -21,7 +21,8 @@
     python -m app bench [--json] [--browser]   throughput benchmark; --browser: slider-to-readout latency
     python -m app reproduce [--json] [--quick] [--html DIR] [--exercise NAME ...]
                                                every paper claim measured; exit 1 if one fails
-    python -m app bench --clients N [--workers W]   headless tabs: scope updates/s, bytes/s, CPU; capacity
+    python -m app bench --clients N [--workers W] [--mix]   headless tabs: scope updates/s, bytes/s, CPU; capacity
+    python -m app bench --analysis [NAME ...]   CPU of a slider move and of opening each panel, per exercise
 
 Bad input (unknown exercise or parameter, non-numbers, NaN, out of range, a
 busy port, an unknown code) exits with status 2 and one line naming the
@@ -209,6 +210,12 @@ def _parser() -> argparse.ArgumentParser:
     bench.add_argument("--slider-every", type=int, default=3, metavar="K",
                        help="with --clients: a tab moves a slider with every K-th camera message (every ~3 s); "
                             "0: never (streaming cost only)")
+    bench.add_argument("--mix", action="store_true",
+                       help="with --clients: spread the tabs over every exercise and over the Scope, Pole map and "
+                            "Analysis tabs (default: all on --exercise, Scope shown)")
+    bench.add_argument("--analysis", nargs="*", default=None, metavar="NAME",
+                       help="instead: CPU of a slider move with the Scope shown, of opening each panel and of "
+                            "the first open, per exercise (default: every exercise)")
     bench.add_argument("--all-steps", action="store_true",
                        help="with --clients: go on after a step below the target (default: stop there)")
     return parser
@@ -242,11 +249,14 @@ def main(argv: list[str] | None = None) -> int:
                                       "--allow-origin http://THIS_BALANCER and --trusted-proxy THIS_BALANCER;"
                                       "\n# run: haproxy -f THIS_FILE"), end="")
             return 0
+        if args.command == "bench" and args.analysis is not None:
+            from app.commands.analysis_bench import main as analysis_bench_main
+            return analysis_bench_main(args.json, args.analysis)
         if args.command == "bench" and args.clients is not None:
             from app.commands.load_bench import main as load_bench_main
             return load_bench_main(args.clients, args.workers, args.steps, args.window, args.exercise,
                                    args.bench_port, args.breakdown, args.json, args.all_steps,
-                                   args.slider_every)
+                                   args.slider_every, args.mix)
         if args.command == "bench":
             from app.commands.bench import main as bench_main
             return bench_main(headless.bench_seconds(args.seconds), args.json)

@@ -1,6 +1,6 @@
 """Linear analysis of the bearing-axis loop: closed-loop poles, noise-driven
-RMS values, step responses, the frequency response's peak and the largest
-tolerable gain factor.
+RMS values, step responses, the frequency response's peak, where a loop affine in
+a gain factor loses stability and the largest tolerable gain factor.
 
 The loop is assembled from the discrete plant model (eq. 1, 3-4, 12), a
 discrete controller and the *steady-state* Kalman filter of eq. 2, and
@@ -169,9 +169,15 @@ def noise_rms(loop: Loop, input_variances: dict[str, float]) -> dict[str, float]
     output when the loop is unstable.
     """
     sys = loop.system
-    A, B, C, D = (np.asarray(M) for M in (sys.A, sys.B, sys.C, sys.D))
+    return dict(zip(LOOP_OUTPUTS, _output_rms(*(np.asarray(M) for M in (sys.A, sys.B, sys.C, sys.D)),
+                                              input_variances)))
+
+
+def _output_rms(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray,
+                input_variances: dict[str, float]) -> np.ndarray:
+    """``noise_rms`` on the loop's matrices (inputs ``LOOP_INPUTS``): each output's RMS."""
     if np.max(np.abs(np.linalg.eigvals(A))) >= 1.0:
-        return {name: float("inf") for name in LOOP_OUTPUTS}
+        return np.full(C.shape[0], np.inf)
     columns = [LOOP_INPUTS.index(name) for name in input_variances]
     Bn, Dn = B[:, columns], D[:, columns]
     W = np.diag(list(input_variances.values()))
@@ -182,7 +188,7 @@ def noise_rms(loop: Loop, input_variances: dict[str, float]) -> dict[str, float]
     Xs = scipy.linalg.solve_discrete_lyapunov(As, Bs @ W @ Bs.T)
     X = Xs * scale[:, None] * scale[None, :]
     covariance = C @ X @ C.T + Dn @ W @ Dn.T
-    return dict(zip(LOOP_OUTPUTS, np.sqrt(np.maximum(np.diag(covariance), 0.0))))
+    return np.sqrt(np.maximum(np.diag(covariance), 0.0))
 
 
 def noise_spectrum(loop: Loop, input_variances: dict[str, float], frequencies_hz,
@@ -265,25 +271,76 @@ def peak_gain(loop: Loop, input_name: str, output_name: str, lowest_hz: float = 
     return float(gain[k]), float(f[k])
 
 
-def largest_gain_factor(rms_at_gain, bound: float, low: float = 0.05,
-                        high: float = 10.0, tolerance: float = 1e-3) -> float:
-    """Largest gain factor g in [low, high] with ``rms_at_gain(g) <= bound``.
+def stability_margins(A_low: np.ndarray, A_high: np.ndarray, low: float, high: float, factors,
+                      discrete: bool = True) -> np.ndarray:
+    """max |z| − 1 (``discrete``) or max Re s of A(f) at each of ``factors``, for a state matrix affine
+    in f given at ``low`` and ``high`` (negative: stable), by one batched eigenvalue call."""
+    A_low = np.asarray(A_low, dtype=float)
+    slope = (np.asarray(A_high, dtype=float) - A_low) / (high - low)
+    stack = A_low[None] + (np.asarray(factors, dtype=float) - low)[:, None, None] * slope[None]
+    eigenvalues = np.linalg.eigvals(stack)
+    return np.max(np.abs(eigenvalues), axis=1) - 1.0 if discrete else np.max(eigenvalues.real, axis=1)
 
-    Bisection from the stable side; assumes the RMS rises with g above the
-    smallest stabilising gain (it does for a PID on this plant).  Returns 0
-    if even ``low`` violates the bound and ``high`` if the bound is never hit.
+
+def first_instability(A_low: np.ndarray, A_high: np.ndarray, low: float, high: float,
+                      discrete: bool = True, factors=None) -> float:
+    """The smallest factor f in (low, high] at which A(f) loses stability, for a state matrix
+    affine in f (a closed loop whose controller output the factor scales) given at both ends and
+    stable at ``low``; ``high`` if it stays stable.
+
+    From eigenvalues alone: the stability margin (``stability_margins``: |z| = 1 or Re s = 0 is the
+    edge) of A(f) on a grid (``factors``, increasing from ``low``; default 48 geometric steps)
+    brackets the first crossing, and Brent's method finds it to 1e-12 relative within the bracket.
     """
-    if not rms_at_gain(low) <= bound:
+    factors = np.geomspace(low, high, 48) if factors is None else np.asarray(factors, dtype=float)
+
+    def margin(at: np.ndarray) -> np.ndarray:
+        return stability_margins(A_low, A_high, low, high, at, discrete)
+
+    unstable = np.flatnonzero(margin(factors) >= 0.0)
+    if unstable.size == 0:
+        return float(high)
+    k = int(unstable[0])
+    if k == 0:
+        return float(low)
+    return float(scipy.optimize.brentq(lambda f: margin(np.array([f]))[0], factors[k - 1], factors[k],
+                                       xtol=1e-12 * factors[k], rtol=1e-12))
+
+
+def largest_gain_factor(loop_low: Loop, loop_high: Loop, low: float, high: float,
+                        input_variances: dict[str, float], output: str, bound: float,
+                        tolerance: float = 1e-4) -> float:
+    """Largest gain factor g in [low, high] at which the steady-state RMS of ``output`` (driven by
+    ``input_variances``, as ``noise_rms``) stays at or below ``bound``; the loop is given at both ends
+    (``loop_low``, ``loop_high``), its matrices affine in g (g scales the controller's output).
+
+    The RMS grows without bound towards the loop's first loss of stability above ``low``
+    (``first_instability``, from eigenvalues), and rises with g below it (for a PID on this
+    plant), so Brent's method finds the factor between ``low`` and that edge, each step one
+    Lyapunov solve on the interpolated matrices.  Returns 0 if even ``low`` exceeds the bound and
+    ``high`` if the bound is never reached.
+    """
+    ends = [[np.asarray(M, dtype=float) for M in (loop.system.A, loop.system.B, loop.system.C, loop.system.D)]
+            for loop in (loop_low, loop_high)]
+    row = LOOP_OUTPUTS.index(output)
+
+    def excess(g: float) -> float:
+        """log(RMS / bound) at factor g (inf where the loop is unstable)."""
+        w = (g - low) / (high - low)
+        with warnings.catch_warnings():           # next to the edge the solve is ill-conditioned, the RMS huge
+            warnings.simplefilter("ignore", scipy.linalg.LinAlgWarning)
+            rms = _output_rms(*((1.0 - w) * M_low + w * M_high for M_low, M_high in zip(*ends)), input_variances)
+        return float(np.log(rms[row] / bound)) if rms[row] > 0 else -np.inf
+
+    if not excess(low) <= 0.0:
         return 0.0
-    if rms_at_gain(high) <= bound:
-        return high
-    while high - low > tolerance:
-        mid = 0.5 * (low + high)
-        if rms_at_gain(mid) <= bound:
-            low = mid
-        else:
-            high = mid
-    return low
+    edge = first_instability(ends[0][0], ends[1][0], low, high)
+    if edge >= high and excess(high) <= 0.0:
+        return float(high)
+    top, back = (edge, 1e-6) if edge < high else (high, 0.0)
+    while not np.isfinite(excess(top)):           # just below the edge the RMS is finite
+        top, back = edge - back * (edge - low), 10.0 * back
+    return float(scipy.optimize.brentq(excess, low, top, xtol=tolerance))
 
 
 def independent_samples(x: np.ndarray) -> float:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from functools import cache, cached_property
 
@@ -147,8 +147,29 @@ def resolve(parameters: tuple[Parameter, ...], overrides: dict | None = None) ->
     return values
 
 
-def in_si(parameters: Iterable[Parameter], values: dict) -> dict[str, float]:
+class SiValues(Mapping):
+    """The numeric controls of ``values`` in SI units, by name (``Parameter.si``), each converted
+    when it is read: a computation that reads ``sensor_lag_us`` through it reads only that control
+    of ``values`` (``lab_modules.memo.ReadValues`` then finds what it depends on)."""
+
+    def __init__(self, parameters: Iterable[Parameter], values: dict):
+        self.numeric = {p.name: p for p in parameters if p.numeric}
+        self.values = values
+
+    def __getitem__(self, name: str) -> float:
+        if name not in self.numeric or name not in self.values:
+            raise KeyError(name)
+        return self.numeric[name].si(self.values)
+
+    def __iter__(self) -> Iterator[str]:
+        return (name for name in self.numeric if name in self.values)
+
+    def __len__(self) -> int:
+        return sum(1 for _ in self)
+
+
+def in_si(parameters: Iterable[Parameter], values: dict) -> SiValues:
     """The numeric controls of ``values`` in SI units, by name (``Parameter.si``): read once where
     the physics starts, ``si["sensor_lag_us"]`` is T_mx in s.  Controls absent from ``values`` and
-    choices among words are left out."""
-    return {p.name: p.si(values) for p in parameters if p.numeric and p.name in values}
+    choices among words are left out; each is read from ``values`` only when asked for."""
+    return SiValues(parameters, values)

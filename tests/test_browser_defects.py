@@ -1,7 +1,7 @@
 """Issue 11's defects 3, 7, 8, 9, 14 and 15 in a real browser: what the student sees in the page.
 
 One tab walks every exercise once (the Exercise chooser, defaults) and keeps what the page shows:
-the readouts table and, in the Pole map tab, both maps (uPlot's x scale, each series' label, stroke
+the readouts tables (Scope and Analysis tab) and, in the Pole map tab, both maps (uPlot's x scale, each series' label, stroke
 colour and points) and the colour legend.  The tests on defects 3, 7, 9, 14 and 15 assert on that
 walk; defect 8 sets worksheet task 4 through the page's controls and reads the status line."""
 
@@ -48,6 +48,15 @@ def _settled_rows(page, name: str) -> list[tuple[str, str, str]]:
     return rows
 
 
+def _analysis_tab_rows(page, name: str) -> list[tuple[str, str, str]]:
+    """The Analysis tab's readouts once it is computed (``_settled_rows``; none if it shows no table)."""
+    waiting = page.get_by_text("Computed when this tab is shown").locator("visible=true")
+    deadline = time.time() + 60.0
+    while waiting.count() and time.time() < deadline:
+        time.sleep(0.25)
+    return _settled_rows(page, name) if page.locator("table:visible").filter(has_text="quantity").count() else []
+
+
 def _settled_maps(page, before: list[dict] | None) -> list[dict]:
     """Both pole maps of the exercise now shown: changed from the previous exercise's, then
     the same in two reads (a quick analysis may be followed by a fuller one)."""
@@ -65,7 +74,8 @@ def _settled_maps(page, before: list[dict] | None) -> list[dict]:
 
 @pytest.fixture(scope="module")
 def walk(tab) -> dict[str, dict]:
-    """Every exercise as the page shows it at its defaults: readouts, pole maps, colour legend."""
+    """Every exercise as the page shows it at its defaults: readouts (under the scope and in the
+    Analysis tab), pole maps, colour legend."""
     page, shown, maps = tab.page, {}, None
     for number, exercise in enumerate(registry().values()):
         started = time.time()
@@ -73,6 +83,8 @@ def walk(tab) -> dict[str, dict]:
             tab.switch_exercise(exercise.title, SWITCH_TIMEOUT_MS)
         tab.open_panel_tab("Scope")
         rows = _settled_rows(page, exercise.name)
+        tab.open_panel_tab("Analysis")                 # its readouts: computed when the tab is shown
+        rows += _analysis_tab_rows(page, exercise.name)
         tab.open_panel_tab("Pole map")
         page.get_by_text("Colours (every exercise)", exact=False).first.wait_for(timeout=60000)
         maps = _settled_maps(page, maps)

@@ -2,7 +2,7 @@
 nothing imports in a circle.
 
 Layers, lowest first: the foundation modules (parameters, formatting, claims,
-analysis, recordings), plants, estimators and controllers (side by side), loops,
+analysis, recordings, memo), plants, estimators and controllers (side by side), loops,
 scenes and exercises, evaluation; then the app: infra, panels, tab and commands
 (side by side), and the roots (cli, server, hall).  Imports inside functions count."""
 
@@ -12,7 +12,7 @@ import pathlib
 import pytest
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
-FOUNDATION = {"parameters", "formatting", "claims", "analysis", "recordings"}
+FOUNDATION = {"parameters", "formatting", "claims", "analysis", "recordings", "memo"}
 #: What each part of the lab may import from the lab (besides itself).
 ALLOWED = {
     "foundation": {"foundation"},

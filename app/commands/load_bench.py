@@ -16,7 +16,12 @@ none stalled is the capacity.  The run stops at the first step that fails, so it
 is bounded in time.
 
 ``--breakdown`` also attributes the received bytes to message kinds (scope
-chart data, readouts, 3D view, ...).
+chart data, readouts, 3D view, ...).  ``--mix`` spreads the tabs over every
+exercise (each switches to its own after the lab opens) and over the panel tabs
+(``PANEL_MIX``: half on the Scope, the others on the Pole map or the Analysis tab,
+reported as the browser's beacon does); each moves a control its exercise's
+Scope readouts depend on (``app.commands.tab_mix``).  The figures of a
+step and their printing: ``app.commands.load_report``.
 """
 
 from __future__ import annotations
@@ -27,7 +32,6 @@ import itertools
 import json
 import os
 import random
-import re
 import socket
 import statistics
 import subprocess
@@ -45,24 +49,21 @@ import viser
 import websockets.asyncio.client
 import zstandard
 
-from lab_modules.exercises import get
+from app.commands.load_report import MIN_UPDATES_PER_S, Step, print_step, print_summary
+from app.commands.tab_mix import KALMAN_NOISE_MOVE, PANEL_MIX, SliderMove, mix_move
+from app.infra.viser_internals import SHOWN_LABEL
+from lab_modules.exercises import SCOPE, get, registry
 
 ROOT = Path(__file__).resolve().parents[2]
 PROTOCOL = f"viser-v{viser.__version__}"      # the subprotocol a viser client of this version offers
-MIN_UPDATES_PER_S = 20.0
 TARGET_BYTES_PER_S = 150e3
 CAMERA_PERIOD_S = 3.0                         # each tab sends a camera message this often ...
 SLIDER_EVERY = 3                              # ... and moves a slider with every third one (an analysis: ~0.1 s CPU)
 CONNECT_RATE_PER_S = 10.0                     # new tabs per second while ramping up
 SETTLE_S = 4.0                                # after the last new tab of a step, before measuring ...
 SETTLE_MAX_S = 90.0                           # ... and until every tab streams (a busy machine builds slowly)
-SLIDER_LABEL = "Position sensor noise"
-SLIDER_VALUES = (1.33, 2.0)
 WORKER_HEADER = "X-Lab-Worker"                # set by the generated HAProxy configuration
 STALL_S = 2.0                                 # a tab with no scope update for longer than this has stalled
-#: An analysis readout of kalman_noise that a move of the position-noise slider changes: the time from a
-#: move to its new value in the tab is the slider-to-readout latency (the scope-window rows change anyway)
-READOUT_ROW = re.compile(r"RMS displacement, measured feedback \| *([^|]+?) *\|")
 
 
 def scope_titles(exercise_name: str) -> tuple[str, ...]:
@@ -107,6 +108,9 @@ class Tab:
     titles: tuple[str, ...]                   # scope chart titles
     breakdown: bool = False
     slider_every: int = SLIDER_EVERY           # 0: the tab never moves a slider
+    move: SliderMove = KALMAN_NOISE_MOVE       # the slider it moves and the readout that answers
+    switch_to: str | None = None              # the title of the exercise to choose once the lab opens
+    panel: str = SCOPE                        # the panel tab it shows
     received_bytes: int = 0
     scope_times: list[float] = field(default_factory=list)   # arrival of each update of the first scope chart
     kind_bytes: Counter = field(default_factory=Counter)
@@ -121,7 +125,7 @@ class Tab:
     scope_uuid: str | None = None
     answers: list = field(default_factory=list)               # replies due to the lab's requests
     moved_at: float | None = None             # the newest slider move whose readout has not come yet
-    readout: str | None = None                # the newest value of READOUT_ROW
+    readout: str | None = None                # the newest value of ``move.readout_row``
     latencies: list[tuple[float, float]] = field(default_factory=list)   # (arrival, seconds since the move)
 
     def _kind(self, message: dict) -> str:
@@ -137,8 +141,14 @@ class Tab:
                     self.scope_uuid = message["uuid"]
             elif kind == "GuiMarkdownMessage":
                 self.kinds[message["uuid"]] = "markdown (readouts, status, tables)"
-            elif kind == "GuiSliderMessage" and label.startswith(SLIDER_LABEL):
+            elif kind == "GuiSliderMessage" and self.move.label and label.startswith(self.move.label):
                 self.slider = message["uuid"]
+            elif kind == "GuiDropdownMessage" and label == "Exercise" and self.switch_to is not None:
+                self.answers.append({"type": "GuiUpdateMessage", "uuid": message["uuid"],
+                                     "updates": {"value": self.switch_to}})
+                self.switch_to = None
+            elif kind == "GuiButtonMessage" and label == f"{SHOWN_LABEL} {self.panel}":   # as the browser's beacon
+                self.answers.append({"type": "GuiUpdateMessage", "uuid": message["uuid"], "updates": {"value": True}})
             return "GUI set-up"
         if kind.startswith("Scene") or kind.endswith("SceneNodeMessage") or "Mesh" in kind or "Label" in kind:
             return "3D view"
@@ -168,7 +178,7 @@ class Tab:
 
     def read_readout(self, message: dict, now: float) -> None:
         content = (message.get("updates") or message.get("props") or {}).get("_markdown")   # viser's name
-        found = READOUT_ROW.search(content) if isinstance(content, str) else None
+        found = self.move.readout_row.search(content) if isinstance(content, str) else None
         if found is None or found.group(1) == self.readout:
             return
         if self.moved_at is not None and self.readout is not None:
@@ -194,7 +204,7 @@ class Tab:
             outbox.put_nowait(camera)
             if self.slider is not None and self.slider_every and turn % self.slider_every == self.slider_every - 1:
                 outbox.put_nowait({"type": "GuiUpdateMessage", "uuid": self.slider,
-                                   "updates": {"value": SLIDER_VALUES[turn // self.slider_every % 2]}})
+                                   "updates": {"value": self.move.values[turn // self.slider_every % 2]}})
                 self.moved_at = time.perf_counter()
             turn += 1
             with contextlib.suppress(asyncio.TimeoutError):
@@ -351,46 +361,9 @@ def lab_server(port: int, workers: int, exercise: str, log: Path,
 
 # -- the measurement ---------------------------------------------------------------
 
-@dataclass
-class Step:
-    clients: int
-    updates_min: float
-    updates_median: float
-    kbytes_per_s_median: float
-    kbytes_per_s_max: float
-    server_cores: float           # CPU seconds per wall second of all server processes
-    client_cores: float           # the same for this benchmark's own process (the tabs)
-    connected: int
-    updates: int                  # scope updates received by all tabs in the window
-    window_s: float
-    readout_latencies_s: list[float] = field(default_factory=list)   # slider move -> new readout, all tabs
-    stalls: list[dict] = field(default_factory=list)   # tab (1 = the first connected), worker, why (Tab.stall)
-
-    @property
-    def ok(self) -> bool:
-        return self.connected == self.clients and self.updates_min >= MIN_UPDATES_PER_S and not self.stalls
-
-    def row(self) -> dict:
-        return {"clients": self.clients, "updates_per_s_min": round(self.updates_min, 1),
-                "updates_per_s_median": round(self.updates_median, 1),
-                "kB_per_s_median": round(self.kbytes_per_s_median, 1),
-                "kB_per_s_max": round(self.kbytes_per_s_max, 1),
-                "server_cores": round(self.server_cores, 3),
-                "server_core_percent_per_tab": round(100 * self.server_cores / self.clients, 2),
-                "server_cpu_ms_per_update": round(1e3 * self.server_cores * self.window_s / max(self.updates, 1), 3),
-                "server_core_percent_per_tab_at_25_per_s": round(
-                    100 * 25 * self.server_cores * self.window_s / max(self.updates, 1), 2),
-                "bench_client_cores": round(self.client_cores, 3),
-                "slider_moves_answered": len(self.readout_latencies_s),
-                "readout_latency_s_median": _rounded(statistics.median(self.readout_latencies_s)
-                                                     if self.readout_latencies_s else None),
-                "readout_latency_s_max": _rounded(max(self.readout_latencies_s, default=None)),
-                "stalled_tabs": len(self.stalls), "stalls": self.stalls,
-                "connected": self.connected, "ok": self.ok}
-
-
-async def _measure(url: str, steps: list[int], window_s: float, server_pid: int, titles: tuple[str, ...],
-                   breakdown: bool, report, all_steps: bool, slider_every: int) -> tuple[list[Step], list[Tab]]:
+async def _measure(url: str, steps: list[int], window_s: float, server_pid: int, new_tab,
+                   report, all_steps: bool) -> tuple[list[Step], list[Tab]]:
+    """``new_tab(url, k)``: the k-th tab."""
     stop = asyncio.Event()
     tabs: list[Tab] = []
     tasks: list[asyncio.Task] = []
@@ -398,7 +371,7 @@ async def _measure(url: str, steps: list[int], window_s: float, server_pid: int,
     try:
         for clients in steps:
             while len(tabs) < clients:
-                tab = Tab(url, titles, breakdown, slider_every)
+                tab = new_tab(url, len(tabs))
                 tabs.append(tab)
                 tasks.append(asyncio.create_task(tab.run(stop)))
                 await asyncio.sleep(1.0 / CONNECT_RATE_PER_S)
@@ -445,19 +418,31 @@ async def _settle(tabs: list[Tab]) -> None:
     await asyncio.sleep(min(SETTLE_S, max(0.0, SETTLE_MAX_S - (time.perf_counter() - began))))
 
 
-def _rounded(seconds: float | None) -> float | None:
-    return None if seconds is None else round(seconds, 3)
-
-
 def ramp(clients: int, steps: int) -> list[int]:
     """Client counts of the steps up to ``clients``."""
     return sorted({max(1, round(clients * (k + 1) / steps)) for k in range(steps)})
 
 
+def tab_factory(exercise: str, breakdown: bool, slider_every: int, mix: bool):
+    """The tabs' maker: each on ``exercise`` with the Scope shown, or with ``mix`` the k-th on the
+    k-th exercise (``registry`` order, in turn) and on ``PANEL_MIX[k]`` (``app.commands.tab_mix``)."""
+    if not mix:
+        titles = scope_titles(exercise)
+        return lambda url, k: Tab(url, titles, breakdown, slider_every)
+    names = list(registry())
+    moves = {name: mix_move(name) for name in names}
+
+    def new_tab(url: str, k: int) -> Tab:
+        name = names[k % len(names)]
+        return Tab(url, scope_titles(name), breakdown, slider_every, moves[name],
+                   switch_to=None if name == exercise else get(name).title, panel=PANEL_MIX[k % len(PANEL_MIX)])
+    return new_tab
+
+
 def run(clients: int, workers: int, steps: int, window_s: float, exercise: str, port: int,
         breakdown: bool, report=lambda step: None, all_steps: bool = False,
-        slider_every: int = SLIDER_EVERY) -> dict:
-    titles = scope_titles(exercise)
+        slider_every: int = SLIDER_EVERY, mix: bool = False) -> dict:
+    new_tab = tab_factory(exercise, breakdown, slider_every, mix)
     with tempfile.TemporaryDirectory() as scratch:
         log = Path(scratch) / "server.log"
         extra: tuple[str, ...] = ()
@@ -465,10 +450,9 @@ def run(clients: int, workers: int, steps: int, window_s: float, exercise: str, 
             extra = ("--worker-ports", str(port + 1))
         with lab_server(port, workers, exercise, log, extra) as server:
             results, tabs = asyncio.run(_measure(f"ws://127.0.0.1:{port}", ramp(clients, steps), window_s,
-                                                 server.pid, titles, breakdown, report, all_steps,
-                                                 slider_every))
+                                                 server.pid, new_tab, report, all_steps))
     passing = [s.clients for s in results if s.ok]
-    result = {"exercise": exercise, "workers": workers, "window_s": window_s,
+    result = {"exercise": "mix" if mix else exercise, "workers": workers, "window_s": window_s,
               "camera_period_s": CAMERA_PERIOD_S, "slider_move_period_s": CAMERA_PERIOD_S * slider_every or None,
               "machine_cores": os.cpu_count(), "load_average_1min": os.getloadavg()[0],
               "steps": [s.row() for s in results],
@@ -487,40 +471,24 @@ def run(clients: int, workers: int, steps: int, window_s: float, exercise: str, 
 
 
 def main(clients: int, workers: int, steps: int, window_s: float, exercise: str, port: int,
-         breakdown: bool, as_json: bool, all_steps: bool = False, slider_every: int = SLIDER_EVERY) -> int:
+         breakdown: bool, as_json: bool, all_steps: bool = False, slider_every: int = SLIDER_EVERY,
+         mix: bool = False) -> int:
     def report(step: Step) -> None:
         if not as_json:
-            r = step.row()
-            print(f"  {r['clients']:4d} tabs: scope updates/s min {r['updates_per_s_min']:5.1f} "
-                  f"median {r['updates_per_s_median']:5.1f}; {r['kB_per_s_median']:6.1f} kB/s per tab; "
-                  f"server {r['server_cores']:.2f} cores = {r['server_core_percent_per_tab']:.2f} % of a core "
-                  f"per tab ({r['server_cpu_ms_per_update']:.2f} ms per update = "
-                  f"{r['server_core_percent_per_tab_at_25_per_s']:.2f} % at 25/s); bench clients {r['bench_client_cores']:.2f} cores"
-                  + (f"; slider move to readout: median {r['readout_latency_s_median']:.2f} s, "
-                     f"max {r['readout_latency_s_max']:.2f} s ({r['slider_moves_answered']} moves)"
-                     if r["slider_moves_answered"] else "")
-                  + f"; stalled tabs: {r['stalled_tabs']}"
-                  + ("" if step.ok else "  <- below target"), flush=True)
-            for stall in r["stalls"]:
-                print(f"         tab {stall['tab']} ({stall['worker'] or 'one process'}) stalled: {stall['why']}",
-                      flush=True)
+            print_step(step)
 
     if not as_json:
         moves = f"a slider move every ~{CAMERA_PERIOD_S * slider_every:.0f} s" if slider_every else "no slider moves"
-        print(f"{exercise}: {workers} worker(s), up to {clients} headless tabs ({moves}) "
-              f"(load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores at start)", flush=True)
+        print(f"{'every exercise and panel (--mix)' if mix else exercise}: {workers} worker(s), "
+              f"up to {clients} headless tabs ({moves}) (load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores at start)", flush=True)
     try:
-        result = run(clients, workers, steps, window_s, exercise, port, breakdown, report, all_steps, slider_every)
+        result = run(clients, workers, steps, window_s, exercise, port, breakdown, report, all_steps, slider_every,
+                     mix)
     except RuntimeError as error:
         print(f"error: {error}", file=sys.stderr)
         return 1
     if as_json:
         print(json.dumps(result, indent=2))
     else:
-        print(f"largest step with every tab >= {MIN_UPDATES_PER_S:.0f} scope updates/s and none stalled: "
-              f"{result['largest_clients_at_min_updates']} tabs")
-        if "bytes_by_kind_per_tab_run" in result:
-            print("bytes per tab by message kind (" + result["breakdown_note"] + "):")
-            for kind, value in result["bytes_by_kind_per_tab_run"].items():
-                print(f"  {kind:<45} {value / 1e3:9.1f} kB")
+        print_summary(result)
     return 0

@@ -80,22 +80,21 @@ class AnalysisPlots:
     """The charts of the Analysis tab (one generation of an exercise)."""
 
     def __init__(self, gui, container, atomic, plots):
-        """Add a chart per plot of the first result into ``container`` (the Analysis tab);
-        ``atomic`` batches a chart's changes into one message (``client.atomic``)."""
+        """Add a chart per plot of ``plots`` (the first result; may be none yet) into ``container``
+        (the Analysis tab); ``atomic`` batches a chart's changes into one message (``client.atomic``)."""
         self.gui, self.container, self.atomic = gui, container, atomic
         self.plots, self.plot_shapes = [], []
         for plot in plots:
             data, options = plot_chart(plot)
             self.plots.append(gui.add_uplot(data, **options, aspect=PLOT_ASPECT))
             self.plot_shapes.append(plot_shape(plot))
-        if not plots:
-            gui.add_markdown("*This exercise has no analysis plots.*")
 
     def update(self, plots) -> None:
         """Show ``plots`` (call holding the tab's GUI lock).  A later result of ``analyse`` (or the
         margins appended after it) may hold more, fewer or other plots than the first: a chart whose
-        plot changed gets its series, axes and title too, not only the data (else its legend and log
-        axes belong to another plot); missing charts are added at the end."""
+        plot changed is replaced by a new one in its place (a shown uPlot chart given another plot's
+        series and data threw 'Invalid array length' and stopped drawing); missing charts are added
+        at the end."""
         for k, plot in enumerate(plots):
             data, options = plot_chart(plot)
             if k >= len(self.plots):
@@ -106,11 +105,11 @@ class AnalysisPlots:
                 with self.atomic():                   # a log axis's ticks follow its range
                     self.plots[k].data, self.plots[k].scales = data, options["scales"]
                     self.plots[k].axes = options["axes"]
-            else:
-                with self.atomic():                   # series, axes and data change together
-                    handle = self.plots[k]
-                    handle.series, handle.axes, handle.data = options["series"], options["axes"], data
-                    handle.scales, handle.title = options["scales"], options["title"]
+            else:                                     # another plot: a new chart in its place
+                with self.atomic(), self.container:
+                    replaced = self.plots[k]
+                    self.plots[k] = self.gui.add_uplot(data, **options, aspect=PLOT_ASPECT, order=replaced.order)
+                    replaced.remove()
                 self.plot_shapes[k] = plot_shape(plot)
         for handle in self.plots[len(plots):]:
             handle.remove()

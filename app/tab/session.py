@@ -32,9 +32,10 @@ from collections.abc import Callable
 
 import viser
 
-from app.infra import layout
+from app.infra import layout, viser_internals
 from app.infra.access import Limits
 from app.infra.store import Store
+from app.infra.traffic import callback
 from app.panels import entry, filter_branch, page, page_query, scope, worksheets
 from app.panels.actions import ActionPanel
 from app.panels.docks import Docks
@@ -47,7 +48,7 @@ from app.panels.scene_view import SceneView
 from app.panels.scope_charts import TIME_AXES, ScopeCharts, time_axis_choice
 from app.panels.status import PAUSED, RUNNING, SimulationStatus, stopped
 from app.panels.text import escaped
-from app.tab.analysis_view import AnalysisView
+from app.tab.analysis_view import WORKSHEET, WORKSHEET_BESIDE, AnalysisView
 from app.tab.assignment import AssignmentTab
 from app.tab.controls import Controls
 from app.tab.gate import TokenGate
@@ -56,7 +57,7 @@ from app.tab.saved import SavedExperiments
 from app.tab.state import LabState
 from app.tab.streaming import Problems, Stream
 from app.tab.worker import TabClosed, TabWorker
-from lab_modules.exercises import Exercise, registry
+from lab_modules.exercises import ANALYSIS, POLE_MAP, Exercise, registry
 from lab_modules.parameters import Parameter, ParameterError
 
 #: An exercise switch waits this long between the last chart update and the removals: a busy browser
@@ -338,15 +339,20 @@ class LabSession:
             time_axis = time_axis_choice(gui, self.time_axis)
             charts = ScopeCharts(gui, exercise.charts, self.state.columns, self.state.window_ms(), self.time_axis)
             time_axis.on_update(on("time axis", lambda: self._set_time_axis(charts, time_axis.value)))
-            self.analysis.add_readouts(gui)
-            ExportButtons.add(gui, exercise, on, self._export_snapshot,
-                              lambda: self.analysis.readout_rows(self.analysis.shown_analysis),
+            self.analysis.add_readouts(gui, first)
+            ExportButtons.add(gui, exercise, on, self._export_snapshot, self.analysis.export_rows,
                               self.client.send_file_download)   # CSV and PNG for a lab report
         with tabs["Pole map"]:
-            self.analysis.add_pole_map(gui, exercise, values, first, on)
+            self._add_beacon(gui, POLE_MAP)
+            self.analysis.add_pole_map(gui, tabs["Pole map"], on)
         with tabs["Analysis"]:
-            self.analysis.add_plots(gui, tabs["Analysis"], first)
+            self._add_beacon(gui, ANALYSIS)
+            self.analysis.add_analysis_tab(gui, tabs["Analysis"])
         self.docks.add_worksheets(gui, worksheets.current(exercise))   # claims table filled in as measured
+        for place, name in (("Worksheet", WORKSHEET), ("beside", WORKSHEET_BESIDE)):
+            if place in tabs:
+                with tabs[place]:
+                    self._add_beacon(gui, name)
         self.stream = Stream(self.client, self.gui_lock, self.state, self.generation, self._current, self.scene,
                              self.scene_view, charts, live, self.status, self.analysis.refresh_live_readouts,
                              self.problems)
@@ -356,9 +362,15 @@ class LabSession:
                 self.docks.put_worksheet_beside(gui, toggle.value)
         toggle.on_update(on("beside", put_beside))
 
-        # The claims may take minutes to measure: a tab closed meanwhile must not be kept alive for them.
-        worksheets.when_measured(exercise, functools.partial(LabSession._show_measured, weakref.proxy(self),
-                                                             self.generation))
+        def measure_claims(asked: list = []) -> None:   # noqa: B006 - once per exercise shown
+            if not asked:
+                asked.append(True)
+                # The claims may take minutes to measure: a tab closed meanwhile must not be kept alive for them.
+                worksheets.when_measured(exercise, functools.partial(LabSession._show_measured, weakref.proxy(self),
+                                                                     self.generation))
+        self.analysis.on_worksheet = measure_claims
+        if self.docks.worksheet_beside:
+            measure_claims()                      # the worksheet floats beside the charts: in view
 
     def _show_measured(self, generation: int, sheet: str) -> None:
         """The worksheet with its claims measured, if ``generation`` still owns the tab."""
@@ -381,6 +393,12 @@ class LabSession:
             if self.scene is not None and not self.closed:
                 camera = self.client.camera
                 self.scene_view.fit(self.client.scene, camera.image_width, camera.image_height, attached)
+
+    def _add_beacon(self, gui, panel: str) -> None:
+        """The browser says when this panel tab is shown or hidden (its analyses are computed then);
+        recorded at once on the event loop, not behind the tab's other events."""
+        viser_internals.visibility_beacon(gui, panel, callback(lambda _: self.analysis.set_shown(panel, True)),
+                                          callback(lambda _: self.analysis.set_shown(panel, False)))
 
     def _still_current(self) -> Callable[[], bool]:
         """Whether the generation being built still owns the tab (for parts that run on threads)."""

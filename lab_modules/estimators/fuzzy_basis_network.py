@@ -53,6 +53,11 @@ def normalise(current_a, position_m) -> np.ndarray:
     return np.stack([i / CURRENT_SCALE_A, x / POSITION_SCALE_M], axis=-1)
 
 
+def distances(inputs: np.ndarray) -> np.ndarray:
+    """Squared distances ‖u - c_r‖² (n, 25) of normalised inputs (n, 2) to the rule centres."""
+    return np.sum((inputs[:, None, :] - CENTRES[None]) ** 2, axis=-1)
+
+
 @dataclass
 class FuzzyBasisNetwork:
     """One output (k_i or k_s); ``weights`` in the output's unit."""
@@ -65,16 +70,17 @@ class FuzzyBasisNetwork:
         """Rules from a 5×5 table (rows x, columns i), all widths ``width``."""
         return cls(np.asarray(table, float).ravel().copy(), np.full(25, float(width)))
 
-    def _basis(self, inputs: np.ndarray):
-        d2 = np.sum((inputs[:, None, :] - CENTRES[None]) ** 2, axis=-1)
-        mu = np.exp(-d2 / self.widths[None] ** 2)
+    def _basis(self, minus_d2: np.ndarray) -> np.ndarray:
+        """The normalised rule activations φ_r (eq. 32-33) at inputs with squared distances d² to the
+        centres (``distances``), given as ``minus_d2`` = −d²."""
+        mu = np.exp(minus_d2 / self.widths[None] ** 2)
         total = np.sum(mu, axis=1, keepdims=True)
-        return mu / np.maximum(total, 1e-300), d2
+        return mu / np.maximum(total, 1e-300)
 
     def predict(self, current_a, position_m) -> np.ndarray:
         inputs = normalise(current_a, position_m)
         shape = inputs.shape[:-1]
-        phi, _ = self._basis(inputs.reshape(-1, 2))
+        phi = self._basis(-distances(inputs.reshape(-1, 2)))
         return (phi @ self.weights).reshape(shape)
 
     def rmse(self, current_a, position_m, target) -> float:
@@ -83,22 +89,23 @@ class FuzzyBasisNetwork:
     def train(self, current_a, position_m, target, epochs: int, rate: float,
               train_weights: bool = False) -> list[float]:
         """Steepest descent (batch) on the relative MSE; returns the training RMSE per epoch."""
-        inputs = normalise(current_a, position_m).reshape(-1, 2)
+        d2 = distances(normalise(current_a, position_m).reshape(-1, 2))   # the inputs stay: once
+        minus_d2, twice_d2 = -d2, 2.0 * d2
         target = np.asarray(target, float).ravel()
         scale = max(float(np.var(target)), 1e-300)
         history = []
         for _ in range(int(epochs)):
-            phi, d2 = self._basis(inputs)
+            phi = self._basis(minus_d2)
             y = phi @ self.weights
             error = y - target
             history.append(float(np.sqrt(np.mean(error**2))))
             # ∂y/∂σ_r = φ_r (w_r - y) · 2 d²_r / σ_r³ ;  ∂y/∂w_r = φ_r
-            dy_dsigma = phi * (self.weights[None] - y[:, None]) * (2.0 * d2 / self.widths[None] ** 3)
+            dy_dsigma = phi * (self.weights[None] - y[:, None]) * (twice_d2 / self.widths[None] ** 3)
             grad_sigma = 2.0 * (error @ dy_dsigma) / (error.size * scale)
             if train_weights:
                 grad_w = 2.0 * (error @ phi) / (error.size * scale)
                 self.weights = self.weights - rate * grad_w * scale
-            self.widths = np.clip(self.widths - rate * grad_sigma, MIN_WIDTH, MAX_WIDTH)
+            self.widths = np.minimum(np.maximum(self.widths - rate * grad_sigma, MIN_WIDTH), MAX_WIDTH)   # clip
         return history
 
     def copy(self) -> FuzzyBasisNetwork:

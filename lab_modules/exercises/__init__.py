@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import enum
 import importlib
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -65,6 +66,50 @@ class Analysis:
     poles: dict[str, np.ndarray]                      # name -> continuous-equivalent poles [rad/s]
     notes: list[str] = field(default_factory=list)
     plots: list[Plot] = field(default_factory=list)
+
+
+#: The panels of a tab that show an exercise's analysis (``Exercise.analyse_panel``): the readouts
+#: under the scope, the pole maps, and the Analysis tab's readouts and plots.
+SCOPE, POLE_MAP, ANALYSIS = "Scope", "Pole map", "Analysis"
+PANELS = (SCOPE, POLE_MAP, ANALYSIS)
+
+
+def results(result: Analysis | Iterator[Analysis]) -> Iterator[Analysis]:
+    """The results of an ``analyse`` or ``analyse_panel`` call one by one: it returns one ``Analysis``
+    or yields a quick one, then fuller ones (computed as they are asked for)."""
+    if isinstance(result, Analysis):
+        yield result
+    else:
+        yield from result
+
+
+def panels_together(exercise: Exercise, values: dict) -> Iterator[Analysis]:
+    """The parts of ``exercise.analyse_panel`` as one analysis: each panel's first result together,
+    then each panel's last (readouts and notes: the Scope's, then the Analysis tab's; poles: the
+    Pole map's; a panel without a part of its own takes it from the Scope's result)."""
+    if type(exercise).analyse_panel is Exercise.analyse_panel:
+        raise NotImplementedError(f"exercise {exercise.name!r} implements neither analyse nor analyse_panel")
+    parts = {panel: exercise.analyse_panel(values, panel) for panel in PANELS}
+    found = {panel: results(part) for panel, part in parts.items() if part is not None}
+    first = {panel: next(found[panel]) for panel in found}
+    yield _together(first)
+    yield _together({panel: _last(found[panel], first[panel]) for panel in found})
+
+
+def _together(parts: dict[str, Analysis]) -> Analysis:
+    """One ``Analysis`` of the panels' ``parts`` (a panel missing from them shows the Scope's part)."""
+    scope = parts[SCOPE]
+    tab = parts.get(ANALYSIS)
+    return Analysis(scope.readouts + (tab.readouts if tab else []), parts.get(POLE_MAP, scope).poles,
+                    scope.notes + (tab.notes if tab else []), scope.plots + (tab.plots if tab else []))
+
+
+def _last(found: Iterator[Analysis], first: Analysis | None = None) -> Analysis:
+    """The last of ``found`` (``first`` if it holds none)."""
+    last = first
+    for last in found:
+        pass
+    return last
 
 
 class PoleCategory(enum.Enum):
@@ -171,8 +216,26 @@ class Exercise:
     def model(self, values: dict) -> dict:
         raise NotImplementedError
 
-    def analyse(self, values: dict) -> Analysis:
-        raise NotImplementedError
+    def analyse(self, values: dict) -> Analysis | Iterator[Analysis]:
+        """Everything the analysis says at these settings (readouts, poles, notes, static plots); may
+        yield a quick result first, then fuller ones.  Headless runs, reports and tests read it whole;
+        the app asks each panel for its part (``analyse_panel``).  Default: the parts of
+        ``analyse_panel`` together (``panels_together``)."""
+        return panels_together(self, values)
+
+    def analyse_panel(self, values: dict, panel: str) -> Analysis | Iterator[Analysis] | None:
+        """The part of the analysis one panel shows (``PANELS``), computed only while it is shown:
+
+        * ``SCOPE``: the readouts and notes under the scope, after every slider move: keep it to
+          a few milliseconds (the costly figures belong to the Analysis tab);
+        * ``POLE_MAP``: ``poles`` (the app adds mode names and the root locus);
+        * ``ANALYSIS``: the Analysis tab's readouts, notes and plots (the app adds the margins of
+          ``open_loops``).
+
+        Returns an ``Analysis`` or yields a quick one first.  The app ignores what a panel does not
+        show.  None: the panel shows its part of the Scope's result.  Default (an exercise that does
+        not split its analysis): the whole ``analyse`` for the Scope, None for the other panels."""
+        return self.analyse(values) if panel == SCOPE else None
 
     def simulation(self, values: dict) -> Simulation:
         raise NotImplementedError

@@ -36,7 +36,7 @@ import scipy.linalg
 from lab_modules import analysis
 from lab_modules.claims import Claim
 from lab_modules.estimators.scheduled_kalman import model_matrices, process_noise
-from lab_modules.exercises import Analysis, Chart, Exercise, Plot, PoleCategory, Series
+from lab_modules.exercises import POLE_MAP, SCOPE, Analysis, Chart, Exercise, Plot, PoleCategory, Series
 from lab_modules.exercises._stiffness_networks import FBFNN_EPOCHS, FBFNN_RATE, NETWORK_DEFAULTS, networks
 from lab_modules.loops.axial_bearing_loop import (
     COLUMNS,
@@ -52,6 +52,7 @@ from lab_modules.loops.axial_bearing_loop import (
     column,
     loop_at_plant_input,
 )
+from lab_modules.memo import remembered
 from lab_modules.parameters import Parameter, in_si
 from lab_modules.plants.axial_bearing import AXIAL, GRID_CURRENTS_A, GRID_POSITIONS_M, N_PER_MM
 from lab_modules.scenes.force_map import OperatingPointScene
@@ -208,6 +209,7 @@ def statistics(trace: np.ndarray) -> dict:
     return out
 
 
+@remembered()
 def steady_filter(values: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(A, H, K, P⁻) of the fixed filter in steady state: the a-priori P⁻ from scipy's Riccati solver."""
     physics = setup(values).physics()
@@ -340,7 +342,13 @@ class AdaptiveFilter(Exercise):
     def pole_categories(self, values: dict) -> dict[str, PoleCategory]:
         return {"filter error (centre model)": PoleCategory.FILTER_ERROR}
 
-    def analyse(self, values: dict):
+    def analyse_panel(self, values: dict, panel: str) -> Analysis:
+        """The Scope: the fixed filter's steady σ_x (Riccati); the Pole map: its error poles; the
+        Analysis tab: the two-point scenario run (Figs. 15-16) with each filter's bias and RMS error."""
+        if panel == SCOPE:
+            return Analysis([("Filter's own σ_x (steady, centre model)", steady_sigma_um(values), "µm")], {}, [])
+        if panel == POLE_MAP:
+            return Analysis([], filter_poles(values), [])
         trace, status = run(values)
         stats = statistics(trace)
         readouts = []
@@ -350,12 +358,11 @@ class AdaptiveFilter(Exercise):
                          (f"F̂_St bias, {LABELS[f]}, point 2", bias[1], "N")]
         for f in FILTERS:
             readouts.append((f"x̂ RMS error, {LABELS[f]}", stats[f]["position_rms_both_um"], "µm"))
-        readouts += [("x̂ RMS ratio scheduled / fixed",
-                      stats["fbfnn"]["position_rms_both_um"] / stats["fixed"]["position_rms_both_um"], ""),
-                     ("Filter's own σ_x (steady, centre model)", steady_sigma_um(values), "µm")]
+        readouts.append(("x̂ RMS ratio scheduled / fixed",
+                         stats["fbfnn"]["position_rms_both_um"] / stats["fixed"]["position_rms_both_um"], ""))
         notes = [f"Run: {status or 'ok'}",
                  "Statistics over the last 100 ms of each operating point (200-300 ms and 500-600 ms)."]
-        return Analysis(readouts, filter_poles(values), notes, plots(trace))
+        return Analysis(readouts, {}, notes, plots(trace))
 
     def simulation(self, values: dict) -> AdaptiveFilterSimulation:
         return AdaptiveFilterSimulation(values)

@@ -23,7 +23,7 @@ import numpy as np
 
 from lab_modules import analysis
 from lab_modules.claims import Claim
-from lab_modules.exercises import Analysis, Chart, Exercise, Plot, PoleCategory, Series
+from lab_modules.exercises import POLE_MAP, SCOPE, Analysis, Chart, Exercise, Plot, PoleCategory, Series
 from lab_modules.exercises._common import axis_mode_matrices, axis_plant_names, pairs, pid_from_values
 from lab_modules.exercises._radial_axis_controls import (
     AMPLIFIER_NOISE_A,
@@ -39,6 +39,7 @@ from lab_modules.exercises._radial_axis_controls import (
 )
 from lab_modules.loops.radial_axis_experiment import AxisSetup, AxisSimulation
 from lab_modules.loops.radial_axis_loop import TRACE_COLUMNS
+from lab_modules.memo import remembered
 from lab_modules.parameters import Parameter, in_si
 from lab_modules.plants.radial_bearing import RIG
 from lab_modules.scenes.bearing import ESTIMATE_RED, MEASURED_GREY, BearingScene, Ghost
@@ -102,13 +103,24 @@ def setup(values: dict) -> AxisSetup:
     )
 
 
-def largest_gain_factors(axis: AxisSetup, values: dict) -> dict[str, float]:
-    """``GAIN_CRITERION`` for both feedback sources (factor relative to the set gains)."""
-    bound = axis.sensor_noise_m
-    return {source: analysis.largest_gain_factor(
-                lambda g, est=(source == "estimated"): axis.noise_rms(est, g)["x_m"], bound,
-                low=0.25, high=10.0, tolerance=2e-3) * values["gain_factor"]
-            for source in ("measured", "estimated")}
+GAIN_SEARCH = (0.25, 10.0)       # the gain factors searched, relative to the set ones
+
+
+@remembered()
+def largest_gain_factors(values: dict) -> dict[str, float]:
+    """``GAIN_CRITERION`` for both feedback sources (the factor on K, the set gain factor included)."""
+    axis = setup(values)
+    low, high = GAIN_SEARCH
+    return {source: analysis.largest_gain_factor(axis.loop(source == "estimated", low),
+                                                 axis.loop(source == "estimated", high), low, high,
+                                                 axis.noise_variances, "x_m", axis.sensor_noise_m)
+            * values["gain_factor"] for source in ("measured", "estimated")}
+
+
+@remembered()
+def spectrum(values: dict) -> Plot:
+    """``motion_spectrum`` at these settings."""
+    return motion_spectrum(setup(values))
 
 
 def motion_spectrum(axis: AxisSetup) -> Plot:
@@ -134,6 +146,7 @@ CONSISTENCY_RUN_S = 4.0
 CONSISTENCY_SETTLE_S = 0.1
 
 
+@remembered()
 def consistency(values: dict) -> dict:
     """Filter consistency of x on a dedicated run (``CONSISTENCY_RUN_S``): share of samples whose
     estimate error lies inside ±3σ (99.7 % for an honest P), mean (error/σ)² (a one-state NEES,
@@ -182,6 +195,40 @@ CLAIMS = (
           "max_gain_factor_ratio", (1.75, None), "×",
           note=f"criterion: {GAIN_CRITERION}", duration_s=CLAIM_RUN_S),
 )
+
+
+def scope_readouts(values: dict) -> list[tuple[str, float, str]]:
+    """The steady-state noise figures of both feedback sources (Lyapunov), the lower bound for any
+    controller and the filter's gains (Riccati)."""
+    axis = setup(values)
+    noise = {source: axis.noise_rms(source == "estimated") for source in ("measured", "estimated")}
+    rms = {source: noise[source]["x_m"] for source in noise}
+    current = {source: noise[source]["current_a"] for source in noise}
+    K, _ = axis.steady_state_filter
+    reduction = 100.0 * (1.0 - rms["estimated"] / rms["measured"])
+    floor = axis.displacement_floor_m
+    return [
+        ("RMS displacement, measured feedback", rms["measured"] * 1e6, "µm"),
+        ("RMS displacement, estimated feedback", rms["estimated"] * 1e6, "µm"),
+        ("Reduction by the filter", reduction, "%"),
+        ("RMS displacement, lower bound for any controller", floor * 1e6, "µm"),
+        ("Largest reduction any controller could reach", 100.0 * (1.0 - floor / rms["measured"]), "%"),
+        ("RMS coil current, measured feedback", current["measured"], "A"),
+        ("RMS coil current, estimated feedback", current["estimated"], "A"),
+        ("Current-noise reduction", 100.0 * (1.0 - current["estimated"] / current["measured"]), "%"),
+        ("Kalman gain K_x (x ← position)", K[0, 0] * 1e6, "µm/V"),
+        ("Kalman gain K_v (v ← position)", K[1, 0] * 1e3, "mm/s/V"),
+    ]
+
+
+def poles(values: dict) -> dict[str, np.ndarray]:
+    """The open-loop plant, the closed loop and the filter error [rad/s]."""
+    axis = setup(values)
+    K, _ = axis.steady_state_filter
+    A, C = np.asarray(axis.model.A), np.asarray(axis.model.C)
+    return {"open-loop plant": np.linalg.eigvals(np.asarray(RIG.continuous_model(axis.sensor_lag_s).A)),
+            "closed loop": analysis.z_to_s(analysis.loop_poles(axis.loop()), T),
+            "filter error": analysis.z_to_s(np.linalg.eigvals(A - A @ K @ C), T)}
 
 
 class KalmanNoise(Exercise):
@@ -234,33 +281,18 @@ class KalmanNoise(Exercise):
                 "sample_time_s": T, "A": A.tolist(), "B": B[:, :1].tolist(), "C": C.tolist(),
                 "Q": axis.filter_Q.tolist(), "R": axis.filter_R.tolist()}
 
-    def analyse(self, values: dict):
-        """Yields the quick figures first (the readouts follow a slider at once),
-        then the same with the largest gain factors (a bisection of Lyapunov solves)."""
-        axis = setup(values)
-        noise = {source: axis.noise_rms(source == "estimated") for source in ("measured", "estimated")}
-        rms = {source: noise[source]["x_m"] for source in noise}
-        current = {source: noise[source]["current_a"] for source in noise}
-        K, _ = axis.steady_state_filter
-        A, C = np.asarray(axis.model.A), np.asarray(axis.model.C)
-        continuous = np.linalg.eigvals(np.asarray(RIG.continuous_model(axis.sensor_lag_s).A))
-        poles = {"open-loop plant": continuous,
-                 "closed loop": analysis.z_to_s(analysis.loop_poles(axis.loop()), T),
-                 "filter error": analysis.z_to_s(np.linalg.eigvals(A - A @ K @ C), T)}
-        reduction = 100.0 * (1.0 - rms["estimated"] / rms["measured"])
-        floor = axis.displacement_floor_m
-        readouts = [
-            ("RMS displacement, measured feedback", rms["measured"] * 1e6, "µm"),
-            ("RMS displacement, estimated feedback", rms["estimated"] * 1e6, "µm"),
-            ("Reduction by the filter", reduction, "%"),
-            ("RMS displacement, lower bound for any controller", floor * 1e6, "µm"),
-            ("Largest reduction any controller could reach", 100.0 * (1.0 - floor / rms["measured"]), "%"),
-            ("RMS coil current, measured feedback", current["measured"], "A"),
-            ("RMS coil current, estimated feedback", current["estimated"], "A"),
-            ("Current-noise reduction", 100.0 * (1.0 - current["estimated"] / current["measured"]), "%"),
-            ("Kalman gain K_x (x ← position)", K[0, 0] * 1e6, "µm/V"),
-            ("Kalman gain K_v (v ← position)", K[1, 0] * 1e3, "mm/s/V"),
-        ]
+    def analyse_panel(self, values: dict, panel: str):
+        """The Scope: the steady-state figures (Lyapunov, Riccati), a few milliseconds; the Pole map:
+        the poles; the Analysis tab: the motion spectrum first, then the filter-consistency run and
+        the largest gain factors (a Lyapunov solve per step of Brent's method)."""
+        if panel == SCOPE:
+            return Analysis(scope_readouts(values), {}, [])
+        if panel == POLE_MAP:
+            return Analysis([], poles(values), [])
+        return self._analysis_tab(values)
+
+    @staticmethod
+    def _analysis_tab(values: dict):
         run_s = f"{CONSISTENCY_RUN_S:g} s run"
         consistency_labels = (f"Estimate error inside ±3σ ({run_s})", f"Mean (error/σ)² of x, {run_s} (1 if consistent)",
                               "Independent samples behind these two")
@@ -268,21 +300,21 @@ class KalmanNoise(Exercise):
                  (f"Filter consistency: measured on a separate {run_s} at these settings and seed (the 50 ms "
                   "scope window holds too few independent samples). With N independent samples the mean "
                   "(error/σ)² of an honest filter lies within 1 ± 2·√(2/N) (95 %).")]
-        plots = [motion_spectrum(axis)]
-        yield Analysis(readouts + [(label, "computing …", "") for label in consistency_labels]
-                       + [("Largest gain factors", "computing …", "")], poles, notes, plots)
+        plots = [spectrum(values)]
+        yield Analysis([(label, "computing …", "") for label in consistency_labels]
+                       + [("Largest gain factors", "computing …", "")], {}, notes, plots)
         run = consistency(values)
         if run["stopped"]:
-            readouts += [(label, "touched down", "") for label in consistency_labels[:2]]
+            readouts = [(label, "touched down", "") for label in consistency_labels[:2]]
         else:
-            readouts += list(zip(consistency_labels, (run["inside_3sigma_percent"], run["mean_nees"],
-                                                      round(run["independent_samples"])), ("%", "", "")))
-        limits = largest_gain_factors(axis, values)
+            readouts = list(zip(consistency_labels, (run["inside_3sigma_percent"], run["mean_nees"],
+                                                     round(run["independent_samples"])), ("%", "", "")))
+        limits = largest_gain_factors(values)
         yield Analysis(readouts + [
             ("Largest gain factor, measured", limits["measured"], "×"),
             ("Largest gain factor, estimated", limits["estimated"], "×"),
             ("Ratio estimated / measured", limits["estimated"] / max(limits["measured"], 1e-9), "×"),
-        ], poles, notes, plots)
+        ], {}, notes, plots)
 
     def live_readouts(self, trace: dict[str, np.ndarray]) -> list[tuple[str, float, str]]:
         def rms(column):
@@ -339,7 +371,7 @@ class KalmanNoise(Exercise):
             status[source] = sim.status_message() or "ok"
         predicted = {s: axis.noise_rms(s == "estimated")["x_m"] for s in ("measured", "estimated")}
         floor = axis.displacement_floor_m
-        limits = largest_gain_factors(axis, values)
+        limits = largest_gain_factors(values)
         K, _ = axis.steady_state_filter
         A, C = np.asarray(axis.model.A), np.asarray(axis.model.C)
         loop_z = analysis.loop_poles(axis.loop())

@@ -43,7 +43,7 @@ import numpy as np
 
 from lab_modules.claims import Claim
 from lab_modules.controllers.lqr import PAPER_LQG, PAPER_LQR_WEIGHTS, gain_deviation, integral_augmented_model
-from lab_modules.exercises import Analysis, Chart, Exercise, PoleCategory, Series
+from lab_modules.exercises import POLE_MAP, SCOPE, Analysis, Chart, Exercise, PoleCategory, Series
 from lab_modules.exercises._common import (
     AXIS_STATES,
     INTEGRAL_STATE,
@@ -79,7 +79,14 @@ from lab_modules.exercises._lqg_vs_pid_fronts import (
     pareto,
     stiffness_at,
 )
-from lab_modules.exercises._lqg_vs_pid_steps import step_plots, step_tests_at
+from lab_modules.exercises._lqg_vs_pid_steps import (
+    NO_OVERSHOOT,
+    scaled,
+    step_and_loop_figures,
+    step_plots,
+    step_readouts,
+    step_tests_at,
+)
 from lab_modules.exercises._radial_axis_controls import (
     FILTER_R_CURRENT,
     FILTER_R_POSITION,
@@ -105,12 +112,11 @@ from lab_modules.scenes.bearing import ESTIMATE_RED, TRUE_BLUE, BearingScene, Gh
 
 #: The names this module offers: the exercise with its parameters and claims, its two loops and
 #: their figures, and the step-test and trade-off-front functions it is built from.
-__all__ = ["CLAIMS", "EXERCISE", "FRONT_LQG_FACTORS", "LARGEST_STEP_RESOLUTION_N", "PARAMETERS", "cost_of",
-           "disturbance_step_figures", "fronts", "largest_disturbance_step", "loop_figures", "pareto",
+__all__ = ["CLAIMS", "EXERCISE", "FRONT_LQG_FACTORS", "LARGEST_STEP_RESOLUTION_N", "NO_OVERSHOOT", "PARAMETERS",
+           "cost_of", "disturbance_step_figures", "fronts", "largest_disturbance_step", "loop_figures", "pareto",
            "regulator", "setups", "side_by_side", "stiffness_at"]
 
 T = RIG.sample_time_s
-NO_OVERSHOOT = "none (never reaches the reference)"   # the overshoot readout of a step that stays below
 
 P = Parameter
 PARAMETERS = (
@@ -302,36 +308,25 @@ class LqgVsPid(Exercise):
     def open_loops(self, values: dict) -> dict:
         return {name: axis.loop_at_plant_input() for name, axis in setups(values).items()}
 
-    def analyse(self, values: dict):
-        """Yields the step tests, the two stiffness definitions and the poles
-        first; then the noise-driven RMS values and the largest disturbance step
-        a loop survives where the step test lost it; then the trade-off fronts
-        (a sweep of about 150 designs, cached per filter and noise setting)."""
+    def analyse_panel(self, values: dict, panel: str):
+        """The Scope: the step tests of both loops (noise-free runs), their two stiffness figures and
+        the LQG's poles and gains; the Pole map: the poles; the Analysis tab: the step plots first,
+        then the noise-driven RMS values and the largest disturbance step a loop survives where the
+        step test lost it, then the trade-off fronts (a sweep of about 150 designs, cached per filter
+        and noise setting)."""
+        if panel == SCOPE:
+            return self._step_readouts(values)
+        if panel == POLE_MAP:
+            loops = setups(values)
+            return Analysis([], pole_sets(loops, regulator(values)), [])
+        return self._analysis_tab(values)
+
+    @staticmethod
+    def _step_readouts(values: dict) -> Analysis:
         loops, lqg = setups(values), regulator(values)
-        tests, poles = step_tests_at(values, loops), pole_sets(loops, lqg)
-        linear = {name: loop_figures(axis) for name, axis in loops.items()}
-        readouts = []
-        for name in LOOPS:
-            # a figure the step test could not measure is a word: the rotor touched down (or never settled)
-            word = "touched down" if tests[name]["stops"] else "not reached"
-            r = {key: (word if isinstance(value, float) and not np.isfinite(value) else value)
-                 for key, value in tests[name].items()}
-            if not isinstance(r["reference_overshoot_percent"], str) and r["reference_overshoot_percent"] < 0:
-                r["reference_overshoot_percent"] = NO_OVERSHOOT   # a negative overshoot is no figure to read
-            f = linear[name]
-            readouts += [
-                (f"{name}: overshoot, reference step", r["reference_overshoot_percent"], "%"),
-                (f"{name}: settling time (±2 %)", _scaled(r["reference_settling_time_s"], 1e3), "ms"),
-                (f"{name}: peak control current, reference step", r["reference_peak_current_a"], "A"),
-                (f"{name}: RMS control current, reference step", r["reference_rms_current_a"], "A"),
-                (f"{name}: step stiffness Δf/x_max (linear)", f["step_stiffness_n_per_m"] * 1e-6, "N/µm"),
-                (f"{name}: min dynamic stiffness (linear, worst frequency)", f["min_dynamic_stiffness_n_per_m"] * 1e-6, "N/µm"),
-                (f"{name}: frequency of the min dynamic stiffness", f["min_dynamic_stiffness_frequency_hz"], "Hz"),
-                (f"{name}: largest deviation, disturbance step", _scaled(r["disturbance_max_deviation_m"], 1e6), "µm"),
-                (f"{name}: s_dyn of the time run (chosen plant)",
-                 _scaled(r["disturbance_dynamic_stiffness_n_per_m"], 1e-6), "N/µm"),
-                (f"{name}: offset 150 ms after the disturbance step", _scaled(r["disturbance_final_offset_m"], 1e6), "µm"),
-            ]
+        tests, linear = step_and_loop_figures(values)
+        poles = pole_sets(loops, lqg)
+        readouts = step_readouts(tests, linear)
         ratio = dominant_pole_ratio(poles)
         readouts += [
             ("Dominant pole, LQG regulator (Re)", dominant_real_part(poles["LQG regulator"]), "rad/s"),
@@ -351,24 +346,31 @@ class LqgVsPid(Exercise):
              "|Δf| / largest deflection after a force step (Fig. 9); minimum dynamic stiffness = the "
              "smallest |F/X| over frequency (a sinusoidal force at the worst frequency, ISO 14839 style)."),
         ]
+        return Analysis(readouts, {}, notes)
+
+    @staticmethod
+    def _analysis_tab(values: dict):
+        loops = setups(values)
+        tests, linear = step_and_loop_figures(values)
         plots = step_plots(tests, values)
         pending_plots = plots + front_plots(values, None)
         pending = [("Noise-driven RMS displacement", "computing …", ""),
                    ("Trade-off fronts", "computing …", "")]
-        yield Analysis(readouts + pending, poles, notes, pending_plots)
-        readouts += [(f"{name}: noise-driven RMS displacement", linear[name]["noise_rms_x_m"] * 1e6, "µm")
-                     for name in LOOPS]
+        yield Analysis(pending, {}, [], pending_plots)
+        readouts = [(f"{name}: noise-driven RMS displacement", linear[name]["noise_rms_x_m"] * 1e6, "µm")
+                    for name in LOOPS]
         readouts += [(f"{name}: noise-driven RMS coil current", linear[name]["noise_rms_current_a"], "A")
                      for name in LOOPS]
+        notes = []
         for name in LOOPS:
             if tests[name]["stops"]:
                 largest = largest_disturbance_step(loops[name])
                 readouts.append((f"{name}: largest disturbance step held (chosen plant)", largest, "N"))
                 notes.append(f"The {name} loop loses the rotor on the {values['disturbance_step_n']:g} N step; "
                              f"it holds at most {largest:.0f} N on this plant (150 ms, no noise).")
-        yield Analysis(readouts + pending[1:], poles, notes, pending_plots)
+        yield Analysis(readouts + pending[1:], {}, notes, pending_plots)
         lqg_front(values)                       # one family, then a chance to give way to newer settings
-        yield Analysis(readouts + pending[1:], poles, notes, pending_plots)
+        yield Analysis(readouts + pending[1:], {}, notes, pending_plots)
         front = front_figures(values, linear["PID"]["noise_rms_current_a"])
         target = FRONT_STIFFNESS_TARGET_N_PER_M * 1e-6
         readouts += [
@@ -380,7 +382,7 @@ class LqgVsPid(Exercise):
             (f"Fronts: least peak current for {target:g} N/µm, PID", front["peak_current_for_target_pid_a"], "A"),
             (f"Fronts: least peak current for {target:g} N/µm, I-PD", front["peak_current_for_target_ipd_a"], "A"),
         ]
-        yield Analysis(readouts, poles, notes, plots + front_plots(values, linear))
+        yield Analysis(readouts, {}, notes, plots + front_plots(values, linear))
 
     def simulation(self, values: dict) -> SideBySide:
         return side_by_side(values)
@@ -436,11 +438,11 @@ class LqgVsPid(Exercise):
                 f"min_dynamic_stiffness_{key}_n_per_um": f["min_dynamic_stiffness_n_per_m"] * 1e-6,
                 f"min_dynamic_stiffness_frequency_{key}_hz": f["min_dynamic_stiffness_frequency_hz"],
                 f"noise_rms_current_linear_{key}_a": f["noise_rms_current_a"],
-                f"dynamic_stiffness_{key}_n_per_um": _scaled(r["disturbance_dynamic_stiffness_n_per_m"], 1e-6),
-                f"max_deviation_{key}_um": _scaled(r["disturbance_max_deviation_m"], 1e6),
-                f"offset_after_disturbance_{key}_um": _scaled(r["disturbance_final_offset_m"], 1e6),
+                f"dynamic_stiffness_{key}_n_per_um": scaled(r["disturbance_dynamic_stiffness_n_per_m"], 1e-6),
+                f"max_deviation_{key}_um": scaled(r["disturbance_max_deviation_m"], 1e6),
+                f"offset_after_disturbance_{key}_um": scaled(r["disturbance_final_offset_m"], 1e6),
                 f"overshoot_{key}_percent": r["reference_overshoot_percent"],
-                f"settling_time_{key}_ms": _scaled(r["reference_settling_time_s"], 1e3),
+                f"settling_time_{key}_ms": scaled(r["reference_settling_time_s"], 1e3),
                 f"peak_current_{key}_a": r["reference_peak_current_a"],
                 f"rms_current_{key}_a": r["reference_rms_current_a"],
                 f"peak_current_disturbance_{key}_a": r["disturbance_peak_current_a"],
@@ -484,11 +486,6 @@ class LqgVsPid(Exercise):
         })
         return {key: None if isinstance(value, float) and not np.isfinite(value) else value
                 for key, value in metrics.items()}
-
-
-def _scaled(value, factor: float):
-    """A readout value in display units, or the word that stands for it."""
-    return value if isinstance(value, str) else value * factor
 
 
 def rms(samples: np.ndarray) -> float:

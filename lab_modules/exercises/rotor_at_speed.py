@@ -35,7 +35,7 @@ import numpy as np
 
 from lab_modules.analysis import loop_at_plant_input, participation, z_to_s
 from lab_modules.claims import Claim
-from lab_modules.exercises import Analysis, Chart, Exercise, Plot, PoleCategory, Series
+from lab_modules.exercises import POLE_MAP, SCOPE, Analysis, Chart, Exercise, Plot, PoleCategory, Series
 from lab_modules.exercises._flexible_rotor import (
     CAPACITIVE_NOISE,
     CONTROLLER,
@@ -149,18 +149,33 @@ def rotor_of(values: dict) -> SpinningRotor:
 
 
 @lru_cache(maxsize=64)
+def _plant(theory: str, modal_damping: float, sensor_offset_mm: float, modes: int, sensor_lag_s: float):
+    """The plant at this sensor (cached per plant)."""
+    return spinning_rotor(theory, modal_damping).plant(GEOMETRY.bearing_m + sensor_offset_mm * 1e-3, modes,
+                                                       sensor_lag_s)
+
+
+@lru_cache(maxsize=64)
 def _plant_and_grid(theory: str, modal_damping: float, sensor_offset_mm: float, modes: int, sensor_lag_s: float):
     """The plant at this sensor and its discretisations on the Campbell and stability-limit grids
     (they depend on no controller setting: cached per plant)."""
-    plant = spinning_rotor(theory, modal_damping).plant(GEOMETRY.bearing_m + sensor_offset_mm * 1e-3, modes,
-                                                        sensor_lag_s)
+    plant = _plant(theory, modal_damping, sensor_offset_mm, modes, sensor_lag_s)
     return plant, discretised(plant, CAMPBELL_SPEEDS_RPM), discretised(plant, LIMIT_SPEEDS_RPM)
 
 
-def plant_and_grid(values: dict, sensor_offset_mm: float | None = None):
+def _plant_key(values: dict, sensor_offset_mm: float | None) -> tuple:
     offset = values["sensor_offset_mm"] if sensor_offset_mm is None else sensor_offset_mm
-    return _plant_and_grid(values["beam_theory"], values["modal_damping_percent"] / 100, float(offset),
-                           int(values["modes"]), in_si(PARAMETERS, values)["sensor_lag_us"])
+    return (values["beam_theory"], values["modal_damping_percent"] / 100, float(offset), int(values["modes"]),
+            in_si(PARAMETERS, values)["sensor_lag_us"])
+
+
+def plant_of(values: dict, sensor_offset_mm: float | None = None):
+    """The plant alone: what the loop at a few speeds needs (no grid discretised)."""
+    return _plant(*_plant_key(values, sensor_offset_mm))
+
+
+def plant_and_grid(values: dict, sensor_offset_mm: float | None = None):
+    return _plant_and_grid(*_plant_key(values, sensor_offset_mm))
 
 
 def compensator(values: dict, sensor_offset_mm: float | None = None, gain_factor: float | None = None):
@@ -172,11 +187,11 @@ def compensator(values: dict, sensor_offset_mm: float | None = None, gain_factor
 
 def loop(values: dict, speeds_rpm=None, sensor_offset_mm: float | None = None, gain_factor: float | None = None):
     """The closed loop at the given speeds (default: the Campbell grid)."""
-    plant, grid, _ = plant_and_grid(values, sensor_offset_mm)
     comp = compensator(values, sensor_offset_mm, gain_factor)
     if speeds_rpm is None:
+        plant, grid, _ = plant_and_grid(values, sensor_offset_mm)
         return closed_loop_at_speed(plant, comp, CAMPBELL_SPEEDS_RPM, discrete=grid)
-    return closed_loop_at_speed(plant, comp, speeds_rpm)
+    return closed_loop_at_speed(plant_of(values, sensor_offset_mm), comp, speeds_rpm)
 
 
 def unbalance_kg_m(values: dict) -> float:
@@ -378,81 +393,18 @@ class RotorAtSpeed(Exercise):
     def pole_categories(self, values: dict) -> dict[str, PoleCategory]:
         return {"open-loop plant": PoleCategory.PLANT, "closed loop": PoleCategory.CLOSED_LOOP}
 
-    def analyse(self, values: dict):
-        n = int(values["modes"])
-        speed = values["speed_rpm"]
-        here = nearest_speed(speed)
-        closed = loop(values)
-        swept = sweep(closed)
-        at_speed = sweep(loop(values, [speed]))
-        free = free_whirl(values)
-        criticals = [c for j in range(n) for c in critical_speeds_rpm(CAMPBELL_SPEEDS_RPM, swept.whirl_hz[:, j, 1])]
-        criticals.sort()
-        response = unbalance_response(closed, unbalance_kg_m(values))
-        response_here = unbalance_response(loop(values, [speed]), unbalance_kg_m(values))[0]
-        clearance = in_si(PARAMETERS, values)["clearance_um"]
-        bearing_here = abs(response_here[LOOP_OUTPUTS.index("r_bearing_m")])
-        offset = values["sensor_offset_mm"]
-        readouts = [("Speed n", speed, "rpm"), ("Spin frequency n / 60", speed / 60, "Hz"),
-                    ("Closed loop at this speed", "stable" if at_speed.stable[0] else "unstable", "")]
-        for j in range(min(n, 3)):
-            for d, direction in ((0, "backward"), (1, "forward")):
-                whirl = f"Closed loop at this speed: mode {j + 1} {direction} whirl"
-                readouts += [(f"{whirl}, frequency", at_speed.whirl_hz[0, j, d], "Hz"),
-                             (f"{whirl}, damping ratio", 100 * at_speed.damping[0, j, d], "%")]
-        for j in range(1, min(n, 3)):
-            for d, direction in ((0, "backward"), (1, "forward")):
-                label = f"Rotor on its ball bearing at {CAMPBELL_SPEEDS_RPM[here]:.0f} rpm: mode {j + 1} {direction} whirl"
-                readouts.append((label, (-1, 1)[d] * free[here, j, d], "Hz"))
-        readouts += ([(f"Critical speed {k + 1} (forward whirl meets 1× spin)", c, "rpm")
-                      for k, c in enumerate(criticals)] or [("Critical speeds below 12,000 rpm", "none", "")])
-        readouts += [
-            (f"Unbalance: U ({values['balance_grade']})", unbalance_kg_m(values) * 1e6, "g·mm"),
-            ("Unbalance: force at this speed", unbalance_kg_m(values) * float(np.pi * speed / 30) ** 2, "N"),
-            ("Unbalance: orbit at the bearing, this speed", bearing_here * 1e6, "µm"),
-            ("Unbalance: orbit at the sensor, this speed",
-             abs(response_here[LOOP_OUTPUTS.index("r_sensor_m")]) * 1e6, "µm"),
-            ("Unbalance: control current amplitude, this speed",
-             abs(response_here[LOOP_OUTPUTS.index("current_a")]), "A"),
-            ("Unbalance: ISO 14839-2 at this speed", f"zone {iso_14839_2_zone(bearing_here, clearance)}", ""),
-        ]
-        peak = int(np.argmax(np.abs(response[:, LOOP_OUTPUTS.index("r_bearing_m")])))
-        peak_m = abs(response[peak, LOOP_OUTPUTS.index("r_bearing_m")])
-        readouts += [("Unbalance: peak orbit at the bearing, 0-12,000 rpm", peak_m * 1e6, "µm"),
-                     ("Unbalance: speed of that peak", CAMPBELL_SPEEDS_RPM[peak], "rpm"),
-                     ("Unbalance: ISO 14839-2 at that peak", f"zone {iso_14839_2_zone(peak_m, clearance)}", "")]
-        notes = [(f"Sensor: {sensor_name(offset)} at {offset:+.0f} mm from the bearing plane; feedback: "
-                  f"{values['feedback']} position. Complex coordinates r = x + i y: a pole with Im s > 0 whirls "
-                  "forward (with the spin), Im s < 0 backward."),
-                 ("The pole map shows the closed loop at the set speed (one pole per whirl: the two planes "
-                  "together, not conjugate pairs).")]
-        if not at_speed.stable[0]:
-            j, d = np.unravel_index(np.argmin(at_speed.damping[0]), at_speed.damping[0].shape)
-            notes.insert(0, f"Unstable at {speed:.0f} rpm: mode {j + 1}'s {('backward', 'forward')[d]} whirl "
-                            f"grows at {at_speed.whirl_hz[0, j, d]:.0f} Hz.")
-        poles = {"open-loop plant": np.linalg.eigvals(plant_and_grid(values)[0].A(float(np.pi * speed / 30))),
-                 "closed loop": at_speed_poles(values)}
-        midspan = midspan_orbit_m(values, closed)
-        readouts += [(f"Unbalance: peak orbit at mid-span, {MIDSPAN_M * 1e3:.0f} mm along the shaft",
-                      np.max(midspan) * 1e6, "µm"),
-                     ("Unbalance: speed of the mid-span peak", CAMPBELL_SPEEDS_RPM[np.argmax(midspan)], "rpm")]
-        plots = [campbell_plot(values, free, swept, criticals)]
-        yield Analysis(readouts + [("Stability limits against speed", "computing …", "")], poles, notes,
-                       plots + [unbalance_plot(values, response, midspan)])
-        sensors = {name: sweep(loop(values, sensor_offset_mm=o)) if o != offset else swept
-                   for name, o in SENSORS.items()}
-        limits = {name: largest_stable_gain(values, o) for name, o in SENSORS.items()}
-        for name, o in SENSORS.items():
-            changes = stability_changes_rpm(values, o, sensors[name].stable)
-            verdict = ("stable over the whole range" if sensors[name].stable.all() else
-                       "unstable over the whole range" if not sensors[name].stable.any() else
-                       "; ".join(f"{what} stability at {rpm:.0f} rpm" for rpm, what in changes))
-            notes = notes + [f"{name.capitalize()} sensor at these gains: {verdict}."]
-            readouts.append((f"{name.capitalize()}: largest stable gain factor, lowest over speed",
-                             float(np.min(limits[name])), "×"))
-        plots += [damping_plot(name, sensors[name]) for name in SENSORS]
-        plots += [limit_plot(limits), unbalance_plot(values, response, midspan)]
-        yield Analysis(readouts, poles, notes, plots)
+    def analyse_panel(self, values: dict, panel: str):
+        """The Scope: the loop, the free rotor and the unbalance at the set speed; the Pole map: the
+        plant's and the closed loop's poles at that speed; the Analysis tab: the sweeps over speed
+        (Campbell diagram, critical speeds, unbalance response), then each sensor's stability and
+        largest stable gain against speed."""
+        if panel == SCOPE:
+            return at_set_speed(values)
+        if panel == POLE_MAP:
+            spin_rad_s = float(np.pi * values["speed_rpm"] / 30)     # Ω = 2π n / 60
+            return Analysis([], {"open-loop plant": np.linalg.eigvals(plant_of(values).A(spin_rad_s)),
+                                 "closed loop": at_speed_poles(values)}, [])
+        return over_speed(values)
 
     def simulation(self, values: dict) -> RunUpSimulation:
         plant, _, _ = plant_and_grid(values)
@@ -552,6 +504,92 @@ class RotorAtSpeed(Exercise):
             else float("nan"),
             "duration_s": len(trace) * RIG.sample_time_s,
         }
+
+
+def at_set_speed(values: dict) -> Analysis:
+    """The readouts at the set speed: the closed loop's whirls, the rotor on its ball bearing at
+    the nearest Campbell speed, the unbalance's force, orbits, current and ISO 14839-2 zone."""
+    n = int(values["modes"])
+    speed = values["speed_rpm"]
+    here = nearest_speed(speed)
+    at_speed_loop = loop(values, [speed])
+    at_speed = sweep(at_speed_loop)
+    free = rotor_of(values).free_whirl_hz(CAMPBELL_SPEEDS_RPM[here:here + 1], n)[0]
+    response_here = unbalance_response(at_speed_loop, unbalance_kg_m(values))[0]
+    bearing_here = abs(response_here[LOOP_OUTPUTS.index("r_bearing_m")])
+    offset = values["sensor_offset_mm"]
+    readouts = [("Speed n", speed, "rpm"), ("Spin frequency n / 60", speed / 60, "Hz"),
+                ("Closed loop at this speed", "stable" if at_speed.stable[0] else "unstable", "")]
+    for j in range(min(n, 3)):
+        for d, direction in ((0, "backward"), (1, "forward")):
+            whirl = f"Closed loop at this speed: mode {j + 1} {direction} whirl"
+            readouts += [(f"{whirl}, frequency", at_speed.whirl_hz[0, j, d], "Hz"),
+                         (f"{whirl}, damping ratio", 100 * at_speed.damping[0, j, d], "%")]
+    for j in range(1, min(n, 3)):
+        for d, direction in ((0, "backward"), (1, "forward")):
+            label = f"Rotor on its ball bearing at {CAMPBELL_SPEEDS_RPM[here]:.0f} rpm: mode {j + 1} {direction} whirl"
+            readouts.append((label, (-1, 1)[d] * free[j, d], "Hz"))
+    readouts += [
+        (f"Unbalance: U ({values['balance_grade']})", unbalance_kg_m(values) * 1e6, "g·mm"),
+        ("Unbalance: force at this speed", unbalance_kg_m(values) * float(np.pi * speed / 30) ** 2, "N"),
+        ("Unbalance: orbit at the bearing, this speed", bearing_here * 1e6, "µm"),
+        ("Unbalance: orbit at the sensor, this speed", abs(response_here[LOOP_OUTPUTS.index("r_sensor_m")]) * 1e6, "µm"),
+        ("Unbalance: control current amplitude, this speed", abs(response_here[LOOP_OUTPUTS.index("current_a")]), "A"),
+        ("Unbalance: ISO 14839-2 at this speed",
+         f"zone {iso_14839_2_zone(bearing_here, in_si(PARAMETERS, values)['clearance_um'])}", ""),
+    ]
+    notes = [(f"Sensor: {sensor_name(offset)} at {offset:+.0f} mm from the bearing plane; feedback: "
+              f"{values['feedback']} position. Complex coordinates r = x + i y: a pole with Im s > 0 whirls "
+              "forward (with the spin), Im s < 0 backward."),
+             ("The pole map shows the closed loop at the set speed (one pole per whirl: the two planes "
+              "together, not conjugate pairs).")]
+    if not at_speed.stable[0]:
+        j, d = np.unravel_index(np.argmin(at_speed.damping[0]), at_speed.damping[0].shape)
+        notes.insert(0, f"Unstable at {speed:.0f} rpm: mode {j + 1}'s {('backward', 'forward')[d]} whirl "
+                        f"grows at {at_speed.whirl_hz[0, j, d]:.0f} Hz.")
+    return Analysis(readouts, {}, notes)
+
+
+def over_speed(values: dict):
+    """The Analysis tab: the Campbell diagram, the critical speeds and the unbalance response over
+    0-12,000 rpm first, then each sensor's stability at these gains and its largest stable gain
+    factor against speed (``largest_stable_gain``: the costly part, cached per loop)."""
+    n = int(values["modes"])
+    offset = values["sensor_offset_mm"]
+    clearance = in_si(PARAMETERS, values)["clearance_um"]
+    closed = loop(values)
+    swept = sweep(closed)
+    free = free_whirl(values)
+    criticals = sorted(c for j in range(n) for c in critical_speeds_rpm(CAMPBELL_SPEEDS_RPM, swept.whirl_hz[:, j, 1]))
+    response = unbalance_response(closed, unbalance_kg_m(values))
+    peak = int(np.argmax(np.abs(response[:, LOOP_OUTPUTS.index("r_bearing_m")])))
+    peak_m = abs(response[peak, LOOP_OUTPUTS.index("r_bearing_m")])
+    midspan = midspan_orbit_m(values, closed)
+    readouts = ([(f"Critical speed {k + 1} (forward whirl meets 1× spin)", c, "rpm") for k, c in enumerate(criticals)]
+                or [("Critical speeds below 12,000 rpm", "none", "")])
+    readouts += [("Unbalance: peak orbit at the bearing, 0-12,000 rpm", peak_m * 1e6, "µm"),
+                 ("Unbalance: speed of that peak", CAMPBELL_SPEEDS_RPM[peak], "rpm"),
+                 ("Unbalance: ISO 14839-2 at that peak", f"zone {iso_14839_2_zone(peak_m, clearance)}", ""),
+                 (f"Unbalance: peak orbit at mid-span, {MIDSPAN_M * 1e3:.0f} mm along the shaft",
+                  np.max(midspan) * 1e6, "µm"),
+                 ("Unbalance: speed of the mid-span peak", CAMPBELL_SPEEDS_RPM[np.argmax(midspan)], "rpm")]
+    plots = [campbell_plot(values, free, swept, criticals)]
+    yield Analysis(readouts + [("Stability limits against speed", "computing …", "")], {}, [],
+                   plots + [unbalance_plot(values, response, midspan)])
+    sensors = {name: sweep(loop(values, sensor_offset_mm=o)) if o != offset else swept for name, o in SENSORS.items()}
+    limits = {name: largest_stable_gain(values, o) for name, o in SENSORS.items()}
+    notes = []
+    for name, o in SENSORS.items():
+        changes = stability_changes_rpm(values, o, sensors[name].stable)
+        verdict = ("stable over the whole range" if sensors[name].stable.all() else
+                   "unstable over the whole range" if not sensors[name].stable.any() else
+                   "; ".join(f"{what} stability at {rpm:.0f} rpm" for rpm, what in changes))
+        notes.append(f"{name.capitalize()} sensor at these gains: {verdict}.")
+        readouts.append((f"{name.capitalize()}: largest stable gain factor, lowest over speed",
+                         float(np.min(limits[name])), "×"))
+    plots += [damping_plot(name, sensors[name]) for name in SENSORS]
+    plots += [limit_plot(limits), unbalance_plot(values, response, midspan)]
+    yield Analysis(readouts, {}, notes, plots)
 
 
 def at_speed_poles(values: dict) -> np.ndarray:

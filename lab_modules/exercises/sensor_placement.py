@@ -44,7 +44,7 @@ import scipy.signal
 
 from lab_modules import analysis
 from lab_modules.claims import Claim
-from lab_modules.exercises import Analysis, Chart, Exercise, Plot, PoleCategory, Series
+from lab_modules.exercises import ANALYSIS, POLE_MAP, Analysis, Chart, Exercise, Plot, PoleCategory, Series
 from lab_modules.exercises._common import AXIS_LAGS, controller_states, nearest_names, pid_from_values
 from lab_modules.exercises._flexible_rotor import (
     CAPACITIVE_NOISE,
@@ -80,6 +80,7 @@ from lab_modules.scenes.rotor import RotorScene
 
 GAIN_STEP = 0.05
 GAIN_SEARCH = np.round(np.arange(GAIN_STEP, 4.0 + 1e-9, GAIN_STEP), 2)   # gain factors tried, bottom up
+EDGE_STEP = 1e-4                  # the mode that goes unstable first: the most unstable this far above the edge
 PATH_OFFSETS_MM = np.linspace(*OFFSET_RANGE_MM, 43)
 
 P = Parameter
@@ -230,8 +231,11 @@ def largest_stable_gain(values: dict, sensor_offset_mm: float | None = None) -> 
     the mode that goes unstable just above it (1-based; None if the loop is still
     stable at the top of the range).
 
-    Scans ``GAIN_SEARCH`` bottom up, then bisects the edge to 0.005.  With no
-    stable gain at all it returns 0.0 and the mode most unstable at the set gains.
+    The closed loop's state matrix is affine in the factor (it scales the PID's output), so
+    the loops at both ends of ``GAIN_SEARCH`` give every factor's poles: the first stable
+    factor of ``GAIN_SEARCH``, then the stability edge above it (``analysis.first_instability``:
+    the bracketing grid step, then Brent's method on the spectral radius).  With no stable
+    gain at all it returns 0.0 and the mode most unstable at the set gains.
     """
     key = (tuple(sorted((k, v) for k, v in values.items() if k not in ("shown_mode", "seed", "time_scale"))),
            sensor_offset_mm)
@@ -241,25 +245,21 @@ def largest_stable_gain(values: dict, sensor_offset_mm: float | None = None) -> 
 @lru_cache(maxsize=256)
 def _largest_stable_gain(key) -> tuple[float, int | None]:
     values, offset = dict(key[0]), key[1]
-
-    def is_stable(g: float) -> bool:
-        return stable(loop(values, g, offset))
+    low, high = float(GAIN_SEARCH[0]), float(GAIN_SEARCH[-1])
+    A_low, A_high = (np.asarray(loop(values, g, offset).A) for g in (low, high))
 
     def most_unstable_mode(g: float) -> int:
         return int(np.argmax(mode_poles(loop(values, g, offset), int(values["modes"])).real)) + 1
 
-    stable_gains = iter(g for g in GAIN_SEARCH if is_stable(g))
-    low = next(stable_gains, None)
-    if low is None:
+    stable = np.flatnonzero(analysis.stability_margins(A_low, A_high, low, high, GAIN_SEARCH) < 0.0)
+    if stable.size == 0:
         return 0.0, most_unstable_mode(values["gain_factor"])
-    high = next((g for g in GAIN_SEARCH if g > low and not is_stable(g)), None)
-    if high is None:
-        return float(GAIN_SEARCH[-1]), None
-    low = high - GAIN_STEP
-    while high - low > 0.005:
-        mid = 0.5 * (low + high)
-        low, high = (mid, high) if is_stable(mid) else (low, mid)
-    return float(low), most_unstable_mode(high)
+    start = float(GAIN_SEARCH[stable[0]])
+    A_start = A_low + (start - low) / (high - low) * (A_high - A_low)
+    edge = analysis.first_instability(A_start, A_high, start, high, factors=GAIN_SEARCH[stable[0]:])
+    if edge >= high:
+        return high, None
+    return edge, most_unstable_mode(edge * (1.0 + EDGE_STEP))
 
 
 def residue_signs(values: dict, sensor_offset_mm: float | None = None) -> np.ndarray:
@@ -420,7 +420,23 @@ class SensorPlacement(Exercise):
     def open_loops(self, values: dict) -> dict:
         return {f"bearing PID, {values['feedback']} x": loop_at_plant_input(values)}
 
-    def analyse(self, values: dict) -> Analysis:
+    def analyse_panel(self, values: dict, panel: str) -> Analysis:
+        """The Scope: the modes, the largest stable gain and the closed loop's damping; the Pole map:
+        the open and closed loop's poles; the Analysis tab: the step response, the poles' paths over
+        the sensor positions and the damping along them."""
+        if panel == ANALYSIS:
+            return Analysis([], {}, [], self._plots(values))
+        if panel == POLE_MAP:
+            si = in_si(PARAMETERS, values)
+            r = rotor(values["modal_damping_percent"] / 100)
+            return Analysis([], {"open-loop plant": np.linalg.eigvals(np.asarray(
+                                    modal_plant(r, GEOMETRY.bearing_m + si["sensor_offset_mm"], int(values["modes"]),
+                                                si["sensor_lag_us"]).A)),
+                                 "closed loop": continuous_poles(loop(values))}, [])
+        return self._readouts(values)
+
+    @staticmethod
+    def _readouts(values: dict) -> Analysis:
         n = int(values["modes"])
         r = rotor(values["modal_damping_percent"] / 100)
         frequencies = r.natural_frequencies_hz(n)
@@ -446,14 +462,10 @@ class SensorPlacement(Exercise):
                   "(mode 1 is the rigid tilting about the ball bearing).")]
         if not stable(closed):
             notes.insert(0, f"Unstable: {unstable_mode_sentence(modes_s)}.")
-        si = in_si(PARAMETERS, values)
-        poles = {"open-loop plant": np.linalg.eigvals(np.asarray(
-                     modal_plant(r, GEOMETRY.bearing_m + si["sensor_offset_mm"], n,
-                                 si["sensor_lag_us"]).A)),
-                 "closed loop": continuous_poles(closed)}
-        return Analysis(readouts, poles, notes=notes, plots=self._plots(values))
+        return Analysis(readouts, {}, notes=notes)
 
-    def _plots(self, values: dict) -> list:
+    @staticmethod
+    def _plots(values: dict) -> list:
         n = int(values["modes"])
         paths = pole_paths(values)
         colours = ("#1f77b4", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2")

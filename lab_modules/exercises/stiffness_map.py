@@ -39,7 +39,7 @@ from lab_modules.estimators.fuzzy_basis_network import (
     training_grid,
 )
 from lab_modules.estimators.stiffness_identification import lsm_factors
-from lab_modules.exercises import Analysis, Chart, Exercise, Plot, PoleCategory, Series
+from lab_modules.exercises import POLE_MAP, SCOPE, Analysis, Chart, Exercise, Plot, PoleCategory, Series
 from lab_modules.exercises._stiffness_networks import (
     NETWORK_CONTROLS,
     NOISE_SEED,
@@ -522,7 +522,18 @@ class StiffnessMap(Exercise):
     def pole_categories(self, values: dict) -> dict[str, PoleCategory]:
         return {"ADALINE weight error (rotor's weight)": PoleCategory.FILTER_ERROR}
 
-    def analyse(self, values: dict):
+    def analyse_panel(self, values: dict, panel: str):
+        """The Scope: the least-squares tables at the chosen node against Tables 4-5; the Pole map:
+        the ADALINE's weight error; the Analysis tab: the tables' plots first, then the trained
+        networks (trained once per setting they depend on) and the ADALINE runs."""
+        if panel == SCOPE:
+            return self._node_readouts(values)
+        if panel == POLE_MAP:
+            return Analysis([], {"ADALINE weight error (rotor's weight)": adaline_pole(values)}, [])
+        return self._analysis_tab(values)
+
+    @staticmethod
+    def _node_readouts(values: dict) -> Analysis:
         ki, ks_mm = identified_tables(values)
         match_4, match_5 = table_matches(ki, ks_mm)
         i_node, x_node = node(values)
@@ -537,17 +548,28 @@ class StiffnessMap(Exercise):
             ("Table 4 entries matched (of 25)", float(match_4), ""),
             ("Table 5 entries matched (of 25)", float(match_5), ""),
         ]
+        notes = ["Table 4's entry at x = 0.5 mm, i = 0.75 A prints 8.45, its mirror 8.47: compared within ±0.03.",
+                 ("3D view: choose the surface with \"3D view shows\"; k_i and k_s show the FBFNN at the "
+                  "scope's training epoch, coloured by |FBFNN − LSM|, and that error on the 41×41 test grid "
+                  "as a heat map on the floor.")]
+        return Analysis(readouts, {}, notes)
+
+    @staticmethod
+    def _analysis_tab(values: dict):
+        ki, ks_mm = identified_tables(values)
+        i_node, x_node = node(values)
+        row, col = list(GRID_POSITIONS_M).index(x_node), list(GRID_CURRENTS_A).index(i_node)
         plots = [*table_plots(ki, ks_mm), plane_plot(values, float(ki[row, col]), float(ks_mm[row, col]) * N_PER_MM),
                  bias_variance_plot(values)]
-        poles = {"ADALINE weight error (rotor's weight)": adaline_pole(values)}
-        yield Analysis(list(readouts), poles, ["FBFNN training and ADALINE run follow …"], list(plots))
+        yield Analysis([("FBFNN and ADALINE", "computing …", "")], {}, ["FBFNN training and ADALINE run follow …"],
+                       list(plots))
         pair = networks(values)
         rmse_before, rmse_after = test_rmse(values, pair.ki_untrained, pair.ks_untrained), \
             test_rmse(values, pair.ki, pair.ks)
         run, zero = adaline_run(values), adaline_run(values, axis="horizontal")
         miso = run["miso_summary"]
         heat_ki, heat_ks = error_maps(values, pair.ki, pair.ks)
-        readouts += [
+        readouts = [
             ("FBFNN k_i: test RMSE untrained", rmse_before[0], "N/A"), ("FBFNN k_i: test RMSE trained", rmse_after[0], "N/A"),
             ("FBFNN k_s: test RMSE untrained", rmse_before[1], "N/mm"),
             ("FBFNN k_s: test RMSE trained", rmse_after[1], "N/mm"),
@@ -564,13 +586,9 @@ class StiffnessMap(Exercise):
             ("least squares of the same samples: k_i", miso["lstsq_weights"][0][0], "N/A"),
             ("least squares of the same samples: k_s", miso["lstsq_weights"][0][1], "N/mm"),
         ]
-        notes = [f"ADALINE run: {run['status']}",
-                 "Table 4's entry at x = 0.5 mm, i = 0.75 A prints 8.45, its mirror 8.47: compared within ±0.03."]
-        notes.append("3D view: choose the surface with \"3D view shows\"; k_i and k_s show the FBFNN at the "
-                     "scope's training epoch, coloured by |FBFNN − LSM|, and that error on the 41×41 test grid "
-                     "as a heat map on the floor.")
-        yield Analysis(readouts, poles, notes, [*plots, *section_plots(values, pair), training_plot(pair),
-                                             adaline_plot(run, zero), miso_plot(run), miso_weights_plot(run)])
+        yield Analysis(readouts, {}, [f"ADALINE run: {run['status']}"],
+                       [*plots, *section_plots(values, pair), training_plot(pair), adaline_plot(run, zero),
+                        miso_plot(run), miso_weights_plot(run)])
 
     def simulation(self, values: dict) -> StiffnessMapSimulation:
         return StiffnessMapSimulation(values)

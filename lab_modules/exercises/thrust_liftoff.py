@@ -36,7 +36,7 @@ import numpy as np
 from lab_modules import analysis
 from lab_modules.claims import Claim
 from lab_modules.estimators.thrust_kalman import PAPER_Q_N2, H
-from lab_modules.exercises import Analysis, Chart, Exercise, Plot, PoleCategory, Series
+from lab_modules.exercises import POLE_MAP, SCOPE, Analysis, Chart, Exercise, Plot, PoleCategory, Series
 from lab_modules.exercises._common import pairs
 from lab_modules.exercises._thrust_liftoff_labels import liftoff_gap_evidence, median_standard_error
 from lab_modules.loops.thrust_liftoff_loop import (
@@ -46,6 +46,7 @@ from lab_modules.loops.thrust_liftoff_loop import (
     linear_loop,
     loop_at_plant_input,
 )
+from lab_modules.memo import remembered
 from lab_modules.parameters import Parameter, in_si
 from lab_modules.plants.thrust_bearing import TABLE_1
 from lab_modules.scenes.thrust_bearing import ThrustBearingScene
@@ -187,6 +188,12 @@ def liftoff(values: dict, source: str, duration_s: float = LIFTOFF_RUN_S, **chan
     return sim.run(duration_s), sim.status_message() or "ok"
 
 
+@remembered()
+def liftoff_runs(values: dict) -> dict[str, tuple[dict, str]]:
+    """``liftoff`` of both feedback sources."""
+    return {src: liftoff(values, src) for src in SOURCES}
+
+
 def steady_window_start_s(duration_s: float) -> float:
     """Start of the steady-state window: ``STEADY_FROM_S``, or half of a shorter run."""
     return min(STEADY_FROM_S, 0.5 * duration_s)
@@ -299,18 +306,30 @@ class ThrustLiftoff(Exercise):
         """The lift-off loop on the linear plant (eq. 5), broken at the current command."""
         return {f"PID, {values['feedback']} x": loop_at_plant_input(setup(values))}
 
-    def analyse(self, values: dict) -> Analysis:
-        """Linear figures (poles, Lyapunov noise), the filter's gain history and the noise-free lift-offs."""
+    def analyse_panel(self, values: dict, panel: str) -> Analysis:
+        """The Scope: the linear figures (Lyapunov noise, Riccati gains, discretisation); the Pole map:
+        the loops' and the filter's poles; the Analysis tab: the noise-free lift-offs, the filter's
+        gain history and the current noise over the sensor's."""
+        if panel == SCOPE:
+            return self._linear_figures(values)
+        if panel == POLE_MAP:
+            return Analysis([], self._poles(values), [])
+        s = setup(values)
+        plots = [self._liftoff_plot(liftoff_runs(values)), self._gain_plot(s.design), self._current_noise_plot(s)]
+        return Analysis([], {}, [], plots)
+
+    @staticmethod
+    def _linear_figures(values: dict) -> Analysis:
+        """Readouts and notes of the linear analysis (poles, Lyapunov noise, the filter's steady state)
+        and of the noise-free lift-offs."""
         s = setup(values)
         b = s.bearing
-        design = s.design
-        gain, _, P_corr = design.steady_state
-        loops = {src: linear_loop(replace(s, use_estimate=src == "estimated")) for src in SOURCES}
-        std = {src: loops[src].output_std(s.sensor_noise_m, s.force_noise_n) for src in SOURCES}
-        filter_z = design.error_poles()
-        radius, damping = pole_damping(filter_z)
+        gain, _, P_corr = s.design.steady_state
+        std = {src: linear_loop(replace(s, use_estimate=src == "estimated")).output_std(s.sensor_noise_m,
+                                                                                         s.force_noise_n)
+               for src in SOURCES}
+        radius, damping = pole_damping(s.design.error_poles())
         regulator = linear_loop(replace(s, use_estimate=False), with_filter=False)
-        no_g = linear_loop(replace(s, use_estimate=False), current_loop=False, with_filter=False)
         Phi, B_d, _ = b.taylor_discretisation()
         Phi_e, B_e, _ = b.exact_discretisation()
         net = (b.current_stiffness_n_per_a * s.proportional_a_per_m - b.negative_stiffness_n_per_m) * 1e-6
@@ -338,6 +357,14 @@ class ThrustLiftoff(Exercise):
             ("Filter: error pole damping", damping, ""),
             ("Filter: largest error of the Taylor Φ against the exact one", float(np.max(np.abs(Phi - Phi_e))), ""),
         ]
+        runs = liftoff_runs(values)
+        figures = {src: liftoff_figures(runs[src][0], s.start_position_m) for src in SOURCES}
+        lifted = [
+            ("Noise-free overshoot, raw PID", figures["measured"]["overshoot_percent"], "%"),
+            ("Noise-free overshoot, filter-PID", figures["estimated"]["overshoot_percent"], "%"),
+            ("Noise-free peak time", figures["measured"]["peak_time_s"] * 1e3, "ms"),
+            ("Noise-free 2 % settling time", figures["measured"]["settling_time_s"], "s"),
+        ]
         notes = [
             ("Discretisation at T = 0.1 ms, Taylor (eq. 9-11) vs exact: "
              f"Φ (Taylor) = {one_line(Phi, 9)}, e^(AT) = {one_line(Phi_e, 9)}; "
@@ -348,21 +375,19 @@ class ThrustLiftoff(Exercise):
         note = instability_note(s)
         if note:
             notes.insert(0, note)
-        poles = {"open-loop plant": np.array([b.open_loop_pole_rad_per_s, -b.open_loop_pole_rad_per_s],
-                                             dtype=complex),
-                 "closed loop with G(s)": to_s(regulator.poles()),
-                 "closed loop without G(s)": to_s(no_g.poles()),
-                 "filter error": analysis.z_to_s(filter_z, T)}
-        runs = {src: liftoff(values, src) for src in SOURCES}
-        figures = {src: liftoff_figures(runs[src][0], s.start_position_m) for src in SOURCES}
-        lifted = [
-            ("Noise-free overshoot, raw PID", figures["measured"]["overshoot_percent"], "%"),
-            ("Noise-free overshoot, filter-PID", figures["estimated"]["overshoot_percent"], "%"),
-            ("Noise-free peak time", figures["measured"]["peak_time_s"] * 1e3, "ms"),
-            ("Noise-free 2 % settling time", figures["measured"]["settling_time_s"], "s"),
-        ]
-        plots = [self._liftoff_plot(runs), self._gain_plot(design), self._current_noise_plot(s)]
-        return Analysis(readouts[:6] + lifted + readouts[6:], poles, notes, plots)
+        return Analysis(readouts[:6] + lifted + readouts[6:], {}, notes)
+
+    @staticmethod
+    def _poles(values: dict) -> dict[str, np.ndarray]:
+        s = setup(values)
+        b = s.bearing
+        regulator = linear_loop(replace(s, use_estimate=False), with_filter=False)
+        no_g = linear_loop(replace(s, use_estimate=False), current_loop=False, with_filter=False)
+        return {"open-loop plant": np.array([b.open_loop_pole_rad_per_s, -b.open_loop_pole_rad_per_s],
+                                            dtype=complex),
+                "closed loop with G(s)": to_s(regulator.poles()),
+                "closed loop without G(s)": to_s(no_g.poles()),
+                "filter error": analysis.z_to_s(s.design.error_poles(), T)}
 
     @staticmethod
     def _liftoff_plot(runs: dict) -> Plot:
