@@ -31,6 +31,16 @@ def test_key_readouts_are_pinned_in_their_order_and_a_word_carries_no_unit():
     assert readouts.pinned_markdown(rows, ()) == ""
 
 
+def test_a_key_readout_not_computed_yet_shows_a_dash_and_says_when_it_comes():
+    """A key readout of the Analysis tab is computed only while that tab is shown (issue 23): pinned
+    above the scope it is a dash until then, with a note that says so."""
+    pinned = readouts.pinned_markdown([("a", 1.0, "A")], ("Critical speed 1", "a"), absent="—")
+    lines = pinned.splitlines()
+    assert lines[2:4] == ["| Critical speed 1 | — |  |", "| a | 1 | A |"]
+    assert lines[-1] == f"*—: {readouts.ABSENT_NOTE}*" and "Analysis tab" in readouts.ABSENT_NOTE
+    assert "*—" not in readouts.pinned_markdown([("a", 1.0, "A")], ("a",), absent="—")   # no note when none is absent
+
+
 def test_a_long_list_is_grouped_by_subject_and_folded_the_scope_window_open():
     rows = [(f"Loose {k}", float(k), "A") for k in range(4)] + [(f"PID: figure {k}", 1.0, "%") for k in range(9)] \
         + [(f"LQG: figure {k}", 1.0, "%") for k in range(9)] + [("Single: one", 1.0, "")] \

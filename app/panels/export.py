@@ -25,6 +25,7 @@ from matplotlib.figure import Figure
 from app.panels.text import escaped
 from lab_modules.exercises import Chart, Exercise
 from lab_modules.exercises._figures import draw_chart
+from lab_modules.parameters import ParameterError
 
 #: Unit tokens at the end of a column name (``x_true_m``, ``ki_true_n_per_a``) and their symbols
 UNIT_TOKENS = {"m": "m", "mm": "mm", "s": "s", "a": "A", "v": "V", "n": "N", "h": "H"}
@@ -162,3 +163,23 @@ class ExportButtons:
         buffer, _, columns, code = self.snapshot()
         self._send(filename(self.exercise, code, chart.title, "png"),
                    chart_png(self.exercise, chart, columns, buffer, code))
+
+
+def add_download(gui, exercise: Exercise, on, values_now: Callable[[], dict], client) -> None:
+    """The exercise's own download button (``exercise.download_label``) with a note under it that
+    says what a press did (issue 11, defect 5: the reason a recording failed used to appear below
+    the fold of the left panel)."""
+    button = gui.add_button(exercise.download_label, icon=viser.Icon.DOWNLOAD)
+    note = gui.add_markdown("")
+
+    def download() -> None:
+        note.content = "*Preparing the file …*"
+        client.flush()
+        try:
+            name, content = exercise.download(values_now())
+        except ParameterError as error:
+            note.content = f"⚠️ {escaped(error)}"
+            return
+        client.send_file_download(name, content, save_immediately=True)
+        note.content = f"Sent {escaped(name)} ({len(content) / 1e3:.0f} kB)."
+    button.on_click(on("download", download))

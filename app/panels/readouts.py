@@ -13,6 +13,9 @@ LONG_LIST_ROWS = 20               # a longer list is grouped, its groups folded
 KEY_HEADER = ("| key readout | value | unit |", "|---|---:|---|")
 HEADER = ("| quantity | value | unit |", "|---|---:|---|")
 LIVE_GROUP = "This run (scope window)"
+#: Why a key readout has no value yet: a scope-window figure needs 10 samples of the run, and a
+#: figure of the Analysis tab is computed while that tab is shown (issue 23), for the values then.
+ABSENT_NOTE = "measured once the run has begun, or (a sweep) while the Analysis tab is shown"
 
 
 def row_markdown(label: str, value, unit: str) -> str:
@@ -20,18 +23,23 @@ def row_markdown(label: str, value, unit: str) -> str:
     return f"| {cell(label)} | {readout(value)} | {'' if isinstance(value, str) else cell(unit)} |"
 
 
-def key_rows(rows, keys: tuple[str, ...]) -> list:
+def key_rows(rows, keys: tuple[str, ...], absent: str | None = None) -> list:
     """The rows named in ``keys`` (an analysis readout's label, or a scope-window readout's without
-    its suffix), in the order of ``keys``; keys without a row yet are left out."""
+    its suffix), in the order of ``keys``; a key without a row yet is left out, or with ``absent``
+    shows that word."""
     by_label = {label: (label, value, unit) for label, value, unit in rows}
-    found = (by_label.get(key) or by_label.get(key + LIVE_SUFFIX) for key in keys)
-    return [row for row in found if row is not None]
+    found = (by_label.get(key) or by_label.get(key + LIVE_SUFFIX) or (absent and (key, absent, "")) for key in keys)
+    return [row for row in found if row]
 
 
-def pinned_markdown(rows, keys: tuple[str, ...]) -> str:
-    """The key readouts as a small table ("" when the exercise names none)."""
-    pinned = key_rows(rows, keys)
-    return "\n".join([*KEY_HEADER, *(row_markdown(*row) for row in pinned)]) if pinned else ""
+def pinned_markdown(rows, keys: tuple[str, ...], absent: str | None = None) -> str:
+    """The key readouts as a small table ("" when the exercise names none); with ``absent``, a key
+    without a row shows that word and a note below the table says when it comes (``ABSENT_NOTE``)."""
+    pinned = key_rows(rows, keys, absent)
+    if not pinned:
+        return ""
+    note = [f"\n*{absent}: {ABSENT_NOTE}*"] if any(value == absent for _, value, _ in pinned) else []
+    return "\n".join([*KEY_HEADER, *(row_markdown(*row) for row in pinned), *note])
 
 
 def group_of(label: str) -> str | None:

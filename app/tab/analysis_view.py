@@ -24,6 +24,8 @@ import time
 import traceback
 from collections.abc import Callable, Iterator
 
+from app.infra import viser_internals
+from app.infra.traffic import callback
 from app.panels import mode_picker, pole_map
 from app.panels.plots import AnalysisPlots
 from app.panels.readouts import grouped_markdown, pinned_markdown
@@ -39,6 +41,7 @@ from lab_modules.exercises import ANALYSIS, PANELS, POLE_MAP, SCOPE, Analysis, E
 ANALYSIS_TURNS = Turns()
 WORKSHEET, WORKSHEET_BESIDE = "Worksheet", "Worksheet beside"   # the worksheet's two places (app.panels.docks)
 NOT_YET_SHOWN = "*Computed when this tab is shown …*"
+KEY_ABSENT = "—"                                 # a key readout not computed yet
 NO_PLOTS = "This exercise has no analysis plots."
 POLE_MAP_NOTE = ("Poles in the s-plane (discrete poles mapped by s = ln z / T); the dashed line is "
                  "the imaginary axis, right of it is unstable. The first map leaves out the fast, "
@@ -102,13 +105,28 @@ class AnalysisView:
         self.readouts = gui.add_markdown("")
         self._show_readouts(first)
 
+    def add_beacon(self, gui, panel: str) -> None:
+        """The browser says when this panel tab is shown or hidden (its analyses are computed then);
+        recorded at once on the event loop, not behind the tab's other events."""
+        viser_internals.visibility_beacon(gui, panel, callback(lambda _: self.set_shown(panel, True)),
+                                          callback(lambda _: self.set_shown(panel, False)))
+
+    def add_worksheet_beacons(self, gui, tabs: dict) -> None:
+        """Beacons in the worksheet's tab and in its place beside the panels (if docked there)."""
+        for place, name in (("Worksheet", WORKSHEET), ("beside", WORKSHEET_BESIDE)):
+            if place in tabs:
+                with tabs[place]:
+                    self.add_beacon(gui, name)
+
     def add_pole_map(self, gui, tab, on) -> None:
         """The Pole map tab: its maps, mode picker, legend and table come with its first view."""
+        self.add_beacon(gui, POLE_MAP)
         self.pole_tab, self.on = tab, on
         self.pole_status = gui.add_markdown(NOT_YET_SHOWN)
 
     def add_analysis_tab(self, gui, tab) -> None:
         """The Analysis tab: its readouts (the margins among them), then its plots."""
+        self.add_beacon(gui, ANALYSIS)
         self.panel_readouts = gui.add_markdown(NOT_YET_SHOWN)
         self.plots = AnalysisPlots(gui, tab, self.client.atomic, [])
 
@@ -306,6 +324,8 @@ class AnalysisView:
                 return False
             self.panel_shown = (serial, shown)
             self.panel_readouts.content = grouped_markdown(shown.readouts, shown.notes)
+            if self.shown_analysis is not None:       # its key readouts pinned above the scope too
+                self._show_readouts(self.shown_analysis)
             self.plots.update(shown.plots)
             self.client.flush()
         return True
@@ -318,17 +338,23 @@ class AnalysisView:
     def export_rows(self) -> list[tuple[str, object, str]]:
         """The readouts for a report: the Scope's with the scope window's, then the Analysis tab's
         if they belong to the current values."""
-        rows = self.readout_rows(self.shown_analysis)
+        return self.readout_rows(self.shown_analysis) + self._analysis_tab_rows()
+
+    def _analysis_tab_rows(self) -> list[tuple[str, object, str]]:
+        """The Analysis tab's readouts if they belong to the current values, else none."""
         serial, shown = self.panel_shown
-        if shown is not None and self.target is not None and serial == self.target[3]:
-            rows += shown.readouts
-        return rows
+        current = shown is not None and self.target is not None and serial == self.target[3]
+        return list(shown.readouts) if current else []
 
     def _show_readouts(self, result: Analysis) -> None:
         """The key readouts above the charts and every readout below them (call holding ``gui_lock``);
-        unchanged texts are not sent again (exercises without scope readouts send nothing each second)."""
+        unchanged texts are not sent again (exercises without scope readouts send nothing each second).
+        A key readout of the Analysis tab (a sweep: rotor_at_speed's critical speeds, kalman_noise's
+        largest gain factors) is not computed with every slider move: it is pinned once that tab has
+        computed it for the current values, a dash until then."""
         rows = self.readout_rows(result)
-        for handle, text in ((self.pinned, pinned_markdown(rows, self.state.exercise.key_readouts)),
+        keys = self.state.exercise.key_readouts
+        for handle, text in ((self.pinned, pinned_markdown(rows + self._analysis_tab_rows(), keys, KEY_ABSENT)),
                              (self.readouts, grouped_markdown(rows, result.notes))):
             if handle is not None and handle.content != text:
                 handle.content = text

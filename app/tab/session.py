@@ -32,14 +32,13 @@ from collections.abc import Callable
 
 import viser
 
-from app.infra import layout, viser_internals
+from app.infra import layout
 from app.infra.access import Limits
 from app.infra.store import Store
-from app.infra.traffic import callback
 from app.panels import entry, filter_branch, page, page_query, scope, worksheets
 from app.panels.actions import ActionPanel
 from app.panels.docks import Docks
-from app.panels.export import ExportButtons
+from app.panels.export import ExportButtons, add_download
 from app.panels.filter_debugger import FilterDebugger
 from app.panels.inspector import FilterInspector
 from app.panels.live import LivePlots
@@ -48,7 +47,7 @@ from app.panels.scene_view import SceneView
 from app.panels.scope_charts import TIME_AXES, ScopeCharts, time_axis_choice
 from app.panels.status import PAUSED, RUNNING, SimulationStatus, stopped
 from app.panels.text import escaped
-from app.tab.analysis_view import WORKSHEET, WORKSHEET_BESIDE, AnalysisView
+from app.tab.analysis_view import AnalysisView
 from app.tab.assignment import AssignmentTab
 from app.tab.controls import Controls
 from app.tab.gate import TokenGate
@@ -57,7 +56,7 @@ from app.tab.saved import SavedExperiments
 from app.tab.state import LabState
 from app.tab.streaming import Problems, Stream
 from app.tab.worker import TabClosed, TabWorker
-from lab_modules.exercises import ANALYSIS, POLE_MAP, Exercise, registry
+from lab_modules.exercises import Exercise, registry
 from lab_modules.parameters import Parameter, ParameterError
 
 #: An exercise switch waits this long between the last chart update and the removals: a busy browser
@@ -107,7 +106,6 @@ class LabSession:
         self.stream: Stream | None = None
         self.inspector: FilterInspector | None = None
         self.debugger: FilterDebugger | None = None
-        self.download_note = None                 # what the exercise's download button did
         self.upload_note = None                   # what its upload button did
         self.time_axis = TIME_AXES[0]             # the scope's time axis, the student's choice for every exercise
         # the browser reports the 3D view's size with every camera update (also on a resize)
@@ -320,9 +318,7 @@ class LabSession:
             upload.on_upload(on("upload", lambda: self._on_upload(upload.value)))
             self.upload_note = gui.add_markdown("")       # what the upload did, right under the button
         if exercise.download_label:
-            download = gui.add_button(exercise.download_label, icon=viser.Icon.DOWNLOAD)
-            download.on_click(on("download", self._on_download))
-            self.download_note = gui.add_markdown("")     # what the button did, where the student looks
+            add_download(gui, exercise, on, self.state.values_now, self.client)
         self.controls.add(gui, exercise, values)
         self.assignment.fix(self.controls.inputs, self.controls.entries, chooser)
         gui.add_html(scope.LEGEND_STYLE)
@@ -343,16 +339,11 @@ class LabSession:
             ExportButtons.add(gui, exercise, on, self._export_snapshot, self.analysis.export_rows,
                               self.client.send_file_download)   # CSV and PNG for a lab report
         with tabs["Pole map"]:
-            self._add_beacon(gui, POLE_MAP)
             self.analysis.add_pole_map(gui, tabs["Pole map"], on)
         with tabs["Analysis"]:
-            self._add_beacon(gui, ANALYSIS)
             self.analysis.add_analysis_tab(gui, tabs["Analysis"])
         self.docks.add_worksheets(gui, worksheets.current(exercise))   # claims table filled in as measured
-        for place, name in (("Worksheet", WORKSHEET), ("beside", WORKSHEET_BESIDE)):
-            if place in tabs:
-                with tabs[place]:
-                    self._add_beacon(gui, name)
+        self.analysis.add_worksheet_beacons(gui, tabs)
         self.stream = Stream(self.client, self.gui_lock, self.state, self.generation, self._current, self.scene,
                              self.scene_view, charts, live, self.status, self.analysis.refresh_live_readouts,
                              self.problems)
@@ -393,12 +384,6 @@ class LabSession:
             if self.scene is not None and not self.closed:
                 camera = self.client.camera
                 self.scene_view.fit(self.client.scene, camera.image_width, camera.image_height, attached)
-
-    def _add_beacon(self, gui, panel: str) -> None:
-        """The browser says when this panel tab is shown or hidden (its analyses are computed then);
-        recorded at once on the event loop, not behind the tab's other events."""
-        viser_internals.visibility_beacon(gui, panel, callback(lambda _: self.analysis.set_shown(panel, True)),
-                                          callback(lambda _: self.analysis.set_shown(panel, False)))
 
     def _still_current(self) -> Callable[[], bool]:
         """Whether the generation being built still owns the tab (for parts that run on threads)."""
@@ -463,19 +448,6 @@ class LabSession:
         with self.gui_lock:
             if not self.closed:
                 self.stream.show_restarted()
-
-    def _on_download(self) -> None:
-        """Make the file; the note under the button says what happened (issue 11, defect 5: the
-        reason a recording failed used to appear below the fold of the left panel)."""
-        self.download_note.content = "*Preparing the file …*"
-        self.client.flush()
-        try:
-            filename, content = self.state.exercise.download(self.state.values_now())
-        except ParameterError as error:
-            self.download_note.content = f"⚠️ {escaped(error)}"
-            return
-        self.client.send_file_download(filename, content, save_immediately=True)
-        self.download_note.content = f"Sent {escaped(filename)} ({len(content) / 1e3:.0f} kB)."
 
     def _on_button(self, which: str) -> None:
         lab = self.state
