@@ -122,14 +122,16 @@ def _cell(text: str) -> str:
     return _plain(text).replace("|", "\\|").replace("\n", " ")
 
 
-def markdown_table(claims: tuple[Claim, ...], values: list[float | None] | None = None) -> str:
+def markdown_table(claims: tuple[Claim, ...], values: list[float | None] | None = None,
+                   parameters: tuple = ()) -> str:
     """The paper-vs-lab table of a worksheet: one row per claim with the lab's
     value (``…`` where ``values`` is None or has None: still being measured),
-    then the claims' notes (how it is measured; a deviation's reason) as a list."""
+    then the claims' notes (how it is measured; a deviation's reason) as a list.
+    A claim's settings are named as the controls label them (``parameters``)."""
     values = values if values is not None else [None] * len(claims)
     rows = ["| source | claim | paper | lab | accepted | status |", "|---|---|---|---|---|---|"]
     for claim, value in zip(claims, values):
-        quantity = claim.quantity + (f" (at {settings_text(claim.settings)})" if claim.settings else "")
+        quantity = claim.quantity + (f" (with {settings_text(claim.settings, parameters)})" if claim.settings else "")
         rows.append("| " + " | ".join(_cell(text) for text in (
             claim.source, quantity, claim.paper, claim.value_text(value), claim.accept_text(),
             status(claim, value))) + " |")
@@ -138,9 +140,20 @@ def markdown_table(claims: tuple[Claim, ...], values: list[float | None] | None 
     return "\n".join(rows + ([""] + notes if notes else []))
 
 
-def settings_text(settings: dict) -> str:
-    """Parameter overrides as ``name = value, ...``."""
-    return ", ".join(f"{name} = {value}" for name, value in settings.items())
+def settings_text(settings: dict, parameters: tuple = ()) -> str:
+    """Parameter overrides as ``name = value, ...``; a parameter among ``parameters`` (``Parameter``)
+    as its control is labelled, with its unit ("Current noise σ(i) = 0 mA")."""
+    labelled = {parameter.name: parameter for parameter in parameters}
+
+    def one(name: str, value) -> str:
+        parameter = labelled.get(name)
+        if parameter is None:
+            return f"{name} = {value}"
+        if isinstance(value, (str, bool)):                  # a choice or a switch: no unit
+            return f"{parameter.label} = {value}"
+        unit = f" {parameter.unit}" if parameter.unit else ""
+        return f"{parameter.label} = {number(value, RANGE_END_DIGITS)}{unit}"
+    return ", ".join(one(name, value) for name, value in settings.items())
 
 
 def render_worksheet(text: str, table: str) -> str:

@@ -73,6 +73,19 @@ def to_csv(recording: Recording) -> str:
     return "\n".join(lines) + "\n"
 
 
+#: Field separators of other CSV dialects, named in the refusal of a header that uses one
+OTHER_SEPARATORS = {";": "semicolons (';', as a spreadsheet set to decimal commas writes CSV)", "\t": "tabs"}
+
+
+def other_separator(header_line: str) -> str | None:
+    """The name of the separator a header line uses instead of commas, if its fields are the
+    recording's columns that way (e.g. ``time_s;reference_mm;…``)."""
+    for separator, name in OTHER_SEPARATORS.items():
+        if all(column in [f.strip() for f in header_line.split(separator)] for column in COLUMNS):
+            return name
+    return None
+
+
 def parse(filename: str, content: bytes, min_rows: int = MIN_ROWS) -> Recording:
     """Read and validate a recording (at least ``min_rows`` samples); any problem ->
     ``ParameterError`` (one line)."""
@@ -102,6 +115,11 @@ def parse(filename: str, content: bytes, min_rows: int = MIN_ROWS) -> Recording:
         if header is None:
             header, header_line = fields, line_number
             missing = [c for c in COLUMNS if c not in header]
+            separator = other_separator(line)
+            if missing and separator:
+                raise ParameterError(
+                    f"{filename}, line {line_number}: the fields are separated by {separator}, not by commas; "
+                    "save it as CSV with ',' between the fields and '.' as the decimal sign")
             if missing:
                 raise ParameterError(
                     f"{filename}, line {line_number}: missing column(s) {', '.join(missing)}; "

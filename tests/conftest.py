@@ -122,3 +122,14 @@ def open_test_store(database):
     yield opener
     for store in opened:
         store.close()
+
+
+def pytest_unconfigure(config):
+    """The run's last line, after pytest's own summary: what was skipped for a missing program and
+    how to install it (``tests/skipped.py``)."""
+    from tests.skipped import reason_of, summary_line
+    reporter = config.pluginmanager.get_plugin("terminalreporter")
+    if reporter is not None:
+        line = summary_line([reason_of(report) for report in reporter.stats.get("skipped", [])])
+        if line:
+            reporter.write_line(line)

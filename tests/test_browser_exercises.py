@@ -44,11 +44,12 @@ CHARTS_JS = """() => Object.values((window.__viserTestpoints || {}).uplots || {}
         c.ctx.save(); c.ctx.font = a.font ? a.font[0] : c.ctx.font;
         const w = c.ctx.measureText(String(values[i])).width; c.ctx.restore();
         return c.valToPos(splits[i], 'x', true) + w / 2 <= c.ctx.canvas.width; })(),
-    ylabel: c.axes[1].label || '', ylabelFits: (() => {       // drawn rotated on the canvas: its length
-        const a = c.axes[1]; if (!a.label) return true;          // must fit the canvas height
+    ylabel: c.axes[1].label || '', ylabelFits: (() => {       // drawn rotated, centred on the plot area:
+        const a = c.axes[1]; if (!a.label) return true;          // each half must fit above and below its centre
         c.ctx.save(); c.ctx.font = a.labelFont ? a.labelFont[0] : c.ctx.font;
         const w = c.ctx.measureText(a.label).width; c.ctx.restore();
-        return w <= c.ctx.canvas.height; })()}))"""
+        const centre = c.bbox.top + c.bbox.height / 2;
+        return w / 2 <= Math.min(centre, c.ctx.canvas.height - centre); })()}))"""
 #: the tabs of the docked chart panel (the strip that holds 'Scope')
 DOCK_TABS_JS = """() => { const s = [...document.querySelectorAll('[role=tab]')].find(t => t.innerText.trim() === 'Scope');
     let p = s && s.parentElement;
@@ -96,7 +97,7 @@ def _readable_charts(page, name: str) -> None:
 
 
 def _readout_table(page):
-    return page.locator("table").filter(has_text="quantity").first
+    return page.locator("table:visible").filter(has_text="quantity").first   # not one folded away
 
 
 def _scope_runs(page) -> bool:

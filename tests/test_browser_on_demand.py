@@ -11,8 +11,10 @@ from lab_modules.exercises import get
 from tests.conftest import browser_only
 
 pytestmark = browser_only
-#: the text of the Analysis tab's readouts table, shown or hidden (a visited tab stays in the page)
-ANALYSIS_TABLE_JS = """() => [...document.querySelectorAll('table')].map(t => t.textContent)
+#: the text of the Analysis tab's readouts (its tables, folded groups included), shown or hidden (a visited
+#: tab stays in the page); not the key readouts pinned above the scope, which show the Analysis tab's figures
+#: once it has computed them
+ANALYSIS_TABLE_JS = """() => [...document.querySelectorAll('.lab-readouts')].map(t => t.textContent)
     .filter(t => t.includes('Largest gain factor, measured')).join('')"""
 
 

@@ -215,7 +215,7 @@ def test_analysis_charts_follow_plots_that_change_between_results():
         def __init__(self, data, **options):
             self.data, self.removed = data, False
             self.title, self.series = options["title"], options["series"]
-            self.order = options.get("order", 0.0)
+            self.order = options.get("order", 0.0)       # a replacing chart takes the replaced one's place
 
         def remove(self):
             self.removed = True

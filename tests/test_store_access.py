@@ -63,6 +63,10 @@ def test_codes_are_checked(open_test_store):
     for bad in ("", "KN", "KN-0000", "K1-ABCD", "KN-ABCDE", "<b>x</b>", "KN-ABCD-EFGH", "ΚΝ-ABCD"):
         with pytest.raises(StoreError, match="not an experiment code"):
             normalise_code(bad)
+    with pytest.raises(StoreError, match="codes never contain 0 "):   # the shape is right: the character is named
+        normalise_code("ZZ-0000")
+    with pytest.raises(StoreError, match="codes never contain I, O "):
+        normalise_code("kn-oi23")
     with pytest.raises(StoreError, match="no experiment is saved under KN-ABCD"):
         store.load("kn-abcd")
     assert code_prefix("lqg_vs_pid") == "LP" and code_prefix("kalman_noise") == "KN"

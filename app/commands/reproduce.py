@@ -89,22 +89,36 @@ def summary(rows: list[Row], quick: bool, seconds: float) -> str:
 
 
 # -- HTML report -------------------------------------------------------------------------------
+#: The page fits a 1366 px screen (no sideways scrolling: the links wrap, long names break, the table
+#: is laid out to the page's width) and prints on A4/Letter (no sticky header, figures not split).
 STYLE = """
-body { font-family: system-ui, sans-serif; margin: 1.2em 2em; color: #222; max-width: 1300px; }
+body { font-family: system-ui, sans-serif; margin: 1.2em 1.5em; color: #222; max-width: 1300px; }
 h1 { font-size: 1.5em; margin-bottom: 0.2em; } h2 { font-size: 1.2em; margin-top: 1.6em; }
 p.meta { color: #555; margin-top: 0; }
-table { border-collapse: collapse; font-size: 13px; width: 100%; }
-th, td { border: 1px solid #ccc; padding: 3px 6px; text-align: left; vertical-align: top; }
+table { border-collapse: collapse; font-size: 13px; width: 100%; table-layout: fixed; }
+th, td { border: 1px solid #ccc; padding: 3px 6px; text-align: left; vertical-align: top;
+         overflow-wrap: break-word; }
 th { background: #f0f0f0; position: sticky; top: 0; }
-td.num { white-space: nowrap; }
+col.exercise { width: 8%; } col.source { width: 10%; } col.quantity { width: 20%; } col.paper { width: 10%; }
+col.lab { width: 8%; } col.accepted { width: 8%; } col.status { width: 8%; } col.reason { width: 28%; }
 tr.pass td.status { color: #17692d; font-weight: 600; }
 tr.deviation td.status { color: #8a5a00; font-weight: 600; }
 tr.fail td.status { color: #b00020; font-weight: 700; } tr.fail { background: #fff0f0; }
 td.reason { color: #555; font-size: 12px; }
-.figures { display: grid; grid-template-columns: repeat(auto-fill, minmax(560px, 1fr)); gap: 8px; }
+.figures { display: grid; grid-template-columns: repeat(auto-fill, minmax(min(560px, 100%), 1fr)); gap: 8px; }
 figure { margin: 0.6em 0; } figure img { width: 100%; height: auto; border: 1px solid #eee; }
 figcaption { color: #555; font-size: 12px; }
-nav a { margin-right: 1em; }
+nav { display: flex; flex-wrap: wrap; gap: 0.3em 1em; }
+@media print {
+  body { margin: 0; max-width: none; font-size: 11px; }
+  nav { display: none; }
+  th { position: static; }
+  table { font-size: 9px; } td.reason { font-size: 8px; }
+  tr, figure { break-inside: avoid; }
+  section { break-before: page; }
+  .figures { display: block; }
+  figure img { max-width: 100%; border: none; }
+}
 """
 
 
@@ -125,7 +139,8 @@ def _table_html(rows: list[Row]) -> str:
                       for i, text in enumerate(cells[:-1]))
         body.append(f'<tr class="{css}">{tds}<td class="status">{html.escape(cells[-1])}</td>'
                     f'<td class="reason">{html.escape(note)}</td></tr>')
-    return f"<table><thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>"
+    widths = "".join(f'<col class="{name}">' for name in (*COLUMNS, "reason"))
+    return f"<table><colgroup>{widths}</colgroup><thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>"
 
 
 def write_html(directory: Path, rows: list[Row], exercises: list[Exercise], headline: str, log=None) -> Path:

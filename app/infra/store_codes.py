@@ -44,12 +44,18 @@ def new_code(prefix: str) -> str:
 
 
 def normalise_code(text: str, what: str = "experiment") -> str:
-    """A code as typed (any case, spaces, dashes or none) in its stored form, or ``StoreError``."""
+    """A code as typed (any case, spaces, dashes or none) in its stored form, or ``StoreError``; a code
+    of the right shape with characters no code holds names them (issue 25: "ZZ-0000")."""
     compact = "".join(str(text).split()).upper().replace("_", "").replace("-", "")
     prefix, rest = compact[:2], compact[2:]
+    shown = str(text).strip()[:40]
     if not (len(prefix) == 2 and prefix.isascii() and prefix.isalpha()
-            and len(rest) in (CODE_RANDOM_CHARS, OLD_CODE_RANDOM_CHARS) and all(c in CODE_ALPHABET for c in rest)):
-        shown = str(text).strip()[:40]
+            and len(rest) in (CODE_RANDOM_CHARS, OLD_CODE_RANDOM_CHARS)):
         raise StoreError(f"{shown!r} is not an {what} code: expected two letters and {CODE_RANDOM_CHARS} "
                          f"characters, e.g. KN-7Q3M-X9TA-HPRW (older codes: KN-7Q3M)")
+    foreign = sorted(set(rest) - set(CODE_ALPHABET))
+    if foreign:                           # the right shape, but characters a code never holds
+        left_out = sorted(set("0123456789ABCDEFGHIJKLMNOPQRSTUVWXYZ") - set(CODE_ALPHABET))
+        raise StoreError(f"{shown!r} is not an {what} code: codes never contain {', '.join(foreign)} "
+                         f"({', '.join(left_out[:-1])} and {left_out[-1]} look alike and are left out)")
     return grouped(prefix, rest)

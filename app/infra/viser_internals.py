@@ -62,7 +62,7 @@ def visibility_beacon(gui, name: str, on_shown, on_hidden) -> None:
     hidden = gui.add_button(f"{HIDDEN_LABEL} {name}")
     shown.on_click(on_shown)
     hidden.on_click(on_hidden)
-    ids = (shown._impl.uuid, hidden._impl.uuid)
+    ids = (element_id(shown), element_id(hidden))
     script = _BEACON_SCRIPT.replace("{shown}", ids[0]).replace("{hidden}", ids[1])
     hide = ",".join(f'[id="{uuid}"]' for uuid in ids)   # at once, before the script hides their boxes
     gui.add_html(f'<style>{hide}{{display:none}}</style>'

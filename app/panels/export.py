@@ -22,8 +22,10 @@ import viser
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from app.panels.text import escaped
 from lab_modules.exercises import Chart, Exercise
 from lab_modules.exercises._figures import draw_chart
+from lab_modules.parameters import ParameterError
 
 #: Unit tokens at the end of a column name (``x_true_m``, ``ki_true_n_per_a``) and their symbols
 UNIT_TOKENS = {"m": "m", "mm": "mm", "s": "s", "a": "A", "v": "V", "n": "N", "h": "H"}
@@ -122,6 +124,7 @@ class ExportButtons:
         ``readout_rows()`` the readouts shown; ``send(filename, content, save_immediately=True)``
         sends a file to the browser."""
         self.exercise, self.snapshot, self.readout_rows, self.send = exercise, snapshot, readout_rows, send
+        self.note = None                          # what the last button sent, under the buttons
 
     @classmethod
     def add(cls, gui, exercise: Exercise, on, snapshot, readout_rows, send) -> ExportButtons:
@@ -137,19 +140,46 @@ class ExportButtons:
             for label, action in choices.items():
                 button = gui.add_button(label, icon=viser.Icon.DOWNLOAD)
                 button.on_click(on(("export", label), action))
+            buttons.note = gui.add_markdown("")
         return buttons
+
+    def _send(self, name: str, content) -> None:
+        """Send a file; the note under the buttons names it (the student sees what a press did)."""
+        self.send(name, content, save_immediately=True)
+        if self.note is not None:
+            self.note.content = f"✓ Sent {escaped(name)} ({len(content) / 1e3:.0f} kB)."
 
     def send_scope(self) -> None:
         buffer, values, columns, code = self.snapshot()
-        content = scope_csv(self.exercise, columns, buffer, values, code)
-        self.send(filename(self.exercise, code, "scope", "csv"), content, save_immediately=True)
+        self._send(filename(self.exercise, code, "scope", "csv"),
+                   scope_csv(self.exercise, columns, buffer, values, code))
 
     def send_readouts(self) -> None:
         _, values, _, code = self.snapshot()
-        content = readouts_csv(self.exercise, self.readout_rows(), values, code)
-        self.send(filename(self.exercise, code, "readouts", "csv"), content, save_immediately=True)
+        self._send(filename(self.exercise, code, "readouts", "csv"),
+                   readouts_csv(self.exercise, self.readout_rows(), values, code))
 
     def send_chart(self, chart: Chart) -> None:
         buffer, _, columns, code = self.snapshot()
-        content = chart_png(self.exercise, chart, columns, buffer, code)
-        self.send(filename(self.exercise, code, chart.title, "png"), content, save_immediately=True)
+        self._send(filename(self.exercise, code, chart.title, "png"),
+                   chart_png(self.exercise, chart, columns, buffer, code))
+
+
+def add_download(gui, exercise: Exercise, on, values_now: Callable[[], dict], client) -> None:
+    """The exercise's own download button (``exercise.download_label``) with a note under it that
+    says what a press did (issue 11, defect 5: the reason a recording failed used to appear below
+    the fold of the left panel)."""
+    button = gui.add_button(exercise.download_label, icon=viser.Icon.DOWNLOAD)
+    note = gui.add_markdown("")
+
+    def download() -> None:
+        note.content = "*Preparing the file …*"
+        client.flush()
+        try:
+            name, content = exercise.download(values_now())
+        except ParameterError as error:
+            note.content = f"⚠️ {escaped(error)}"
+            return
+        client.send_file_download(name, content, save_immediately=True)
+        note.content = f"Sent {escaped(name)} ({len(content) / 1e3:.0f} kB)."
+    button.on_click(on("download", download))

@@ -37,8 +37,23 @@ def plot_chart(plot: Plot) -> tuple[tuple, dict]:
         "axes": (viser.uplot.Axis(label=plot.x_label),
                  viser.uplot.Axis(label=plot.y_label, **(scope.log_axis(y_span["min"], y_span["max"])
                                                          if plot.log_y else {}))),
-        "scales": {"x": viser.uplot.Scale(time=False, **(LOG_SCALE if plot.log_x else {})),
+        "scales": {"x": viser.uplot.Scale(time=False, range=x_range(x, plot.log_x), **(LOG_SCALE if plot.log_x else {})),
                    "y": viser.uplot.Scale(auto=False, **(LOG_SCALE if plot.log_y else {}), **y_span)}}
+
+
+def x_range(x: np.ndarray, log: bool) -> tuple[float, float]:
+    """The x range a plot holds explicitly: its data, on a logarithmic axis in whole decades.
+    Without it viser carries the x range over from the previous data in proportion to the data's
+    extent, and when a plot's data changed extent (lqg_vs_pid's fronts: a two-point placeholder,
+    then 159 designs) that reached zero or below on a logarithmic axis, where uPlot looks for tick
+    marks for a minute and then fails ("Invalid array length", issue 25)."""
+    finite = x[np.isfinite(x) & (x > 0)] if log else x[np.isfinite(x)]
+    if finite.size == 0:
+        return (0.1, 1.0) if log else (0.0, 1.0)
+    low, high = float(finite.min()), float(finite.max())
+    if log:
+        return float(10.0 ** np.floor(np.log10(low))), float(10.0 ** np.ceil(np.log10(high) if high > low else np.log10(low) + 1))
+    return (low, high) if high > low else (low - 0.5, high + 0.5)
 
 
 def log_span(*arrays: np.ndarray, decades: int = LOG_DECADES) -> dict[str, float]:

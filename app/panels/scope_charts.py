@@ -25,31 +25,61 @@ SCOPE_ASPECT = 2.2                # width / height of a scope chart
 JIT = {"nogil": True, "cache": True}
 
 
+#: The scope's time axes: the rolling window (time before the newest sample) or, to read when
+#: something happened in a run, the time since Reset, one window-long page after the other
+TIME_AXES = ("time before now", "time since reset")
+SINCE_RESET = TIME_AXES[1]
+
+
+def time_axis_choice(gui, initial: str):
+    """The Scope tab's "Time axis" dropdown: the time before now (rolling) or the time since reset."""
+    return gui.add_dropdown("Time axis", TIME_AXES, initial_value=initial,
+                            hint="Time before the newest sample (rolling), or the time since Reset, one window "
+                                 "after the other (to read when something happened in the run).")
+
+
 class ScopeCharts:
     """The scope charts of one generation of an exercise, in the Scope tab."""
 
-    def __init__(self, gui, charts: tuple[Chart, ...], columns: dict[str, int], window_ms: float):
+    def __init__(self, gui, charts: tuple[Chart, ...], columns: dict[str, int], window_ms: float,
+                 time_axis: str = TIME_AXES[0]):
         self.charts = charts
         self.plans = [chart_plan(chart, columns) for chart in charts]
         self.y_ranges = [scope.StickyRange() for _ in charts]
-        self.handles = [self._add(gui, chart, window_ms) for chart in charts]
+        self.time_axis = time_axis
+        self.handles = [self._add(gui, chart, window_ms, time_axis) for chart in charts]
         self.drawn_until: float | None = None     # time [s] of the newest sample drawn
         self.frames_drawn = 0
 
     @staticmethod
-    def _add(gui, chart: Chart, window_ms: float):
-        series = [viser.uplot.Series(label="time before now [ms]")]
+    def _add(gui, chart: Chart, window_ms: float, time_axis: str, order: float | None = None):
+        x_label = "time since reset [s]" if time_axis == SINCE_RESET else "time before now [ms]"
+        series = [viser.uplot.Series(label=x_label)]
         if chart.band:
             series += [viser.uplot.Series(label="+3σ", stroke="rgba(214,39,40,0.35)", width=1),
                        viser.uplot.Series(label="−3σ", stroke="rgba(214,39,40,0.35)", width=1)]
         series += [viser.uplot.Series(label=s.label, stroke=s.color, width=1.5) for s in chart.series]
         series += [scope.ANCHOR_SERIES, scope.LAYOUT_SERIES]   # y range held still; axes laid out each frame
         bands = (viser.uplot.Band(series=(1, 2), fill="rgba(214,39,40,0.12)"),) if chart.band else None
+        extent = (0.0, window_ms * 1e-3) if time_axis == SINCE_RESET else (-window_ms, 0.0)
         return gui.add_uplot(
-            scope.placeholder(-window_ms, 0.0, len(series) - 1), tuple(series),
+            scope.placeholder(*extent, len(series) - 1), tuple(series),
             title=f"{chart.title} [{chart.unit}]", bands=bands,
-            **scope.chart_options("time before now [ms]", f"[{chart.unit}]"),
-            scales={"x": viser.uplot.Scale(time=False)}, aspect=SCOPE_ASPECT)
+            **scope.chart_options(x_label, f"[{chart.unit}]"),
+            scales={"x": viser.uplot.Scale(time=False)}, aspect=SCOPE_ASPECT, order=order)
+
+    def set_time_axis(self, gui, time_axis: str, window_ms: float) -> None:
+        """Make the charts anew on ``time_axis`` (the x label is part of a chart's options), in their
+        places; call inside the Scope tab's container, holding the tab's GUI lock."""
+        if time_axis == self.time_axis:
+            return
+        self.time_axis = time_axis
+        for index, (chart, handle) in enumerate(zip(self.charts, self.handles)):
+            order = handle.order
+            handle.remove()
+            self.handles[index] = self._add(gui, chart, window_ms, time_axis, order)
+        self.y_ranges = [scope.StickyRange() for _ in self.charts]
+        self.drawn_until = None                   # the next frame draws them
 
     def draw(self, buffer: np.ndarray, sample_time_s: float, window_ms: float, now: float,
              closed=lambda: False) -> None:
@@ -59,17 +89,58 @@ class ScopeCharts:
         if len(buffer) < 2 or buffer[-1, 0] == self.drawn_until:
             return
         self.drawn_until = buffer[-1, 0]
-        # the time axis runs from -window to 0 ms: float32 while that resolves a sample
-        float32_time = float32_resolves(np.array((window_ms,)), sample_time_s * 1e3)
+        if self.time_axis == SINCE_RESET:
+            rows, frame_ms, page_start_s = page(buffer, window_ms)
+            # the x axis is the time since reset [s]: float32 while that resolves a sample
+            float32_time = float32_resolves(np.array((page_start_s + window_ms * 1e-3,)), sample_time_s)
+        else:
+            rows, frame_ms, page_start_s = buffer, window_ms, None
+            # the time axis runs from -window to 0 ms: float32 while that resolves a sample
+            float32_time = float32_resolves(np.array((window_ms,)), sample_time_s * 1e3)
         self.frames_drawn += 1
-        for plan, handle, y_range in zip(self.plans, self.handles, self.y_ranges):
+        for chart, plan, handle, y_range in zip(self.charts, self.plans, self.handles, self.y_ranges):
             if closed():
                 return
-            t_ms, t32, ys, low, high = chart_frame(buffer, *plan, sample_time_s, window_ms,
+            t_ms, t32, ys, low, high = chart_frame(rows, *plan, sample_time_s, frame_ms,
                                                    SCOPE_BUCKETS, ROUGHNESS_ROWS)
+            band = 2 if chart.band else 0
+            if band and not chart.band_in_range:  # the range follows the series; the band is cut at its edges
+                low, high = finite_extremes(ys[band:])
             y_range.follow(low, high, now)
+            if band and not chart.band_in_range and y_range.shown() is not None:
+                np.clip(ys[:band], *y_range.shown(), out=ys[:band])
+            if page_start_s is not None:
+                t_ms, ys = on_page(t_ms, ys, frame_ms, page_start_s, window_ms)
+                t32 = t_ms.astype(np.float32)
             send_data(handle, (t32 if float32_time else t_ms, *ys, scope.anchor(y_range.shown()),
                                scope.layout(self.frames_drawn)))
+
+
+def page(buffer: np.ndarray, window_ms: float) -> tuple[np.ndarray, float, float]:
+    """The time-since-reset axis: the rows of the newest window-long page (pages start at whole
+    multiples of the window after reset), the page's time so far [ms] and its start [s]."""
+    window_s = window_ms * 1e-3
+    last = buffer[-1, 0]
+    start = np.floor(last / window_s + 1e-9) * window_s
+    rows = buffer[np.searchsorted(buffer[:, 0], start - 1e-12):]
+    return rows, max((last - start) * 1e3, 1e-9), float(start)
+
+
+def on_page(t_ms: np.ndarray, ys: np.ndarray, frame_ms: float, page_start_s: float,
+            window_ms: float) -> tuple[np.ndarray, np.ndarray]:
+    """A frame's time axis [ms before its newest row] as time since reset [s] on its page, and one
+    more point at the page's end with no values (NaN: uPlot draws nothing there), so the x extent
+    is the whole page and holds still until the next page (see ``scope``: a moving extent
+    confuses viser's chart)."""
+    since_s = page_start_s + (t_ms + frame_ms) * 1e-3
+    pad = np.full((ys.shape[0], 1), np.nan, dtype=ys.dtype)
+    return np.append(since_s, page_start_s + window_ms * 1e-3), np.hstack([ys, pad])
+
+
+def finite_extremes(ys: np.ndarray) -> tuple[float, float]:
+    """The lowest and highest finite value of ``ys`` (inf, −inf if none)."""
+    finite = ys[np.isfinite(ys)]
+    return (float(finite.min()), float(finite.max())) if finite.size else (np.inf, -np.inf)
 
 
 def chart_plan(chart: Chart, columns: dict[str, int]) -> tuple:

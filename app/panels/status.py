@@ -3,13 +3,28 @@
 
 from __future__ import annotations
 
+import re
+
 from app.panels.live import SpeedMeter
 
 RUNNING, PAUSED = "**Running**", "**Paused**"
 
 
+#: a simulation's own stop message: "Stopped at t = 12.0 ms: the rotor touched down. …"
+STOPPED_AT = re.compile(r"^Stopped (at [^:]+): ")
+
+
 def stopped(message: str) -> str:
-    return f"**Stopped: {message}** Press Run or Reset to start again."
+    """The status line of a stopped run, always "Stopped: …": a message that already says so is not
+    prefixed again ("Stopped: Stopped at t = …" was the issue), "Stopped at t = 12.0 ms: reason"
+    reads "Stopped: at t = 12.0 ms, reason"."""
+    if message.startswith("Stopped:"):
+        said = message
+    elif STOPPED_AT.match(message):
+        said = STOPPED_AT.sub(r"Stopped: \1, ", message, count=1)
+    else:
+        said = f"Stopped: {message}"
+    return f"**{said}** Press Run or Reset to start again."
 
 
 class SimulationStatus:

@@ -24,17 +24,13 @@ def cell(text: str) -> str:
     return str(text).replace("|", "\\|")
 
 
+LIVE_SUFFIX = " (scope window)"   # marks the readouts an exercise computes from the scope window
+
+
 def readout_rows(result, exercise, trace: dict) -> list[tuple[str, object, str]]:
     """The readouts a tab shows: the analysis's (``result`` may be None), then the exercise's
     figures of the scope window ``trace`` (column -> samples) once it holds 10 samples."""
     rows = list(result.readouts) if result is not None else []
     if len(next(iter(trace.values()), ())) >= 10:
-        rows += [(f"{label} (scope window)", value, unit) for label, value, unit in exercise.live_readouts(trace)]
+        rows += [(f"{label}{LIVE_SUFFIX}", value, unit) for label, value, unit in exercise.live_readouts(trace)]
     return rows
-
-
-def readouts_table(rows, notes=()) -> str:
-    """Readouts ``(label, value, unit)`` as a Markdown table, then ``notes`` in italics."""
-    lines = ["| quantity | value | unit |", "|---|---:|---|"]
-    lines += [f"| {cell(label)} | {readout(value)} | {cell(unit)} |" for label, value, unit in rows]
-    return "\n".join(lines) + "\n\n" + "\n\n".join(f"*{n}*" for n in notes)

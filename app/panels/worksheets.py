@@ -21,7 +21,7 @@ from pathlib import Path
 from app.panels.typeset import typeset
 from lab_modules.claims import markdown_table, render_worksheet
 from lab_modules.evaluation.measured_claims import measure
-from lab_modules.exercises import Exercise, get
+from lab_modules.exercises import Exercise, get, registry
 
 STATIC = Path(__file__).resolve().parents[2] / "static"
 PARENT_CHECK_S = 1.0            # how often the measuring process checks that the server still runs
@@ -55,10 +55,18 @@ def _measure(name: str) -> list[float]:
 
 
 def text(exercise: Exercise, values: list[float] | None = None) -> str:
-    """The worksheet with its claims table (``values`` None: "…" in the lab column) and its
-    formulas typeset (``app.panels.typeset``)."""
+    """The worksheet with its claims table (``values`` None: "…" in the lab column), other
+    exercises named by their titles and its formulas typeset (``app.panels.typeset``)."""
     sheet = (STATIC / "worksheets" / exercise.worksheet).read_text(encoding="utf-8")
-    return typeset(render_worksheet(sheet, markdown_table(exercise.claims, values)))
+    return typeset(titled(render_worksheet(sheet, markdown_table(exercise.claims, values, exercise.parameters))))
+
+
+def titled(sheet: str) -> str:
+    """Exercises a worksheet names by their internal name (`ekf_disturbance`) named as the
+    Exercise chooser lists them, so a student finds them there (issue 25)."""
+    for name, other in registry().items():
+        sheet = sheet.replace(f"`{name}`", f"*{other.title}*")
+    return sheet
 
 
 def current(exercise: Exercise) -> str:

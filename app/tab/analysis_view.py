@@ -24,9 +24,12 @@ import time
 import traceback
 from collections.abc import Callable, Iterator
 
+from app.infra import viser_internals
+from app.infra.traffic import callback
 from app.panels import mode_picker, pole_map
 from app.panels.plots import AnalysisPlots
-from app.panels.text import readout_rows, readouts_table
+from app.panels.readouts import grouped_markdown, pinned_markdown
+from app.panels.text import readout_rows
 from app.tab.state import LabState
 from app.tab.turns import Turns
 from app.tab.worker import TabWorker
@@ -38,6 +41,7 @@ from lab_modules.exercises import ANALYSIS, PANELS, POLE_MAP, SCOPE, Analysis, E
 ANALYSIS_TURNS = Turns()
 WORKSHEET, WORKSHEET_BESIDE = "Worksheet", "Worksheet beside"   # the worksheet's two places (app.panels.docks)
 NOT_YET_SHOWN = "*Computed when this tab is shown …*"
+KEY_ABSENT = "—"                                 # a key readout not computed yet
 NO_PLOTS = "This exercise has no analysis plots."
 POLE_MAP_NOTE = ("Poles in the s-plane (discrete poles mapped by s = ln z / T); the dashed line is "
                  "the imaginary axis, right of it is unstable. The first map leaves out the fast, "
@@ -71,6 +75,7 @@ class AnalysisView:
         self.on = None                            # the tab's GUI callback factory (``TabWorker.on``)
         self.shown_analysis: Analysis | None = None   # the Scope's, redrawn with fresh scope readouts
         self.readouts = None
+        self.pinned = None                        # the key readouts, above the scope's charts
         self.panel_shown: tuple[int, Analysis | None] = (0, None)   # the Analysis tab's (serial, result)
         self.panel_readouts = None
         self.plots: AnalysisPlots | None = None
@@ -91,17 +96,37 @@ class AnalysisView:
         self.handoff = (dict(values), found, first)
         return first
 
+    def add_pinned(self, gui) -> None:
+        """The key readouts of the worksheet's tasks, above the charts (in view at 1366 x 768)."""
+        self.pinned = gui.add_markdown("")
+
     def add_readouts(self, gui, first: Analysis) -> None:
         self.shown_analysis = first
-        self.readouts = gui.add_markdown(self.readouts_markdown(first))
+        self.readouts = gui.add_markdown("")
+        self._show_readouts(first)
+
+    def add_beacon(self, gui, panel: str) -> None:
+        """The browser says when this panel tab is shown or hidden (its analyses are computed then);
+        recorded at once on the event loop, not behind the tab's other events."""
+        viser_internals.visibility_beacon(gui, panel, callback(lambda _: self.set_shown(panel, True)),
+                                          callback(lambda _: self.set_shown(panel, False)))
+
+    def add_worksheet_beacons(self, gui, tabs: dict) -> None:
+        """Beacons in the worksheet's tab and in its place beside the panels (if docked there)."""
+        for place, name in (("Worksheet", WORKSHEET), ("beside", WORKSHEET_BESIDE)):
+            if place in tabs:
+                with tabs[place]:
+                    self.add_beacon(gui, name)
 
     def add_pole_map(self, gui, tab, on) -> None:
         """The Pole map tab: its maps, mode picker, legend and table come with its first view."""
+        self.add_beacon(gui, POLE_MAP)
         self.pole_tab, self.on = tab, on
         self.pole_status = gui.add_markdown(NOT_YET_SHOWN)
 
     def add_analysis_tab(self, gui, tab) -> None:
         """The Analysis tab: its readouts (the margins among them), then its plots."""
+        self.add_beacon(gui, ANALYSIS)
         self.panel_readouts = gui.add_markdown(NOT_YET_SHOWN)
         self.plots = AnalysisPlots(gui, tab, self.client.atomic, [])
 
@@ -202,6 +227,7 @@ class AnalysisView:
             if panel == SCOPE:
                 self.shown_analysis = None
                 self.readouts.content = message
+                self.pinned.content = ""
             elif panel == ANALYSIS:
                 self.panel_shown = (0, None)
                 self.panel_readouts.content = message
@@ -227,7 +253,7 @@ class AnalysisView:
                 if not self._showing(generation, serial):
                     return
                 self.shown_analysis = last
-                self.readouts.content = self.readouts_markdown(last)
+                self._show_readouts(last)
                 self.client.flush()                   # the readouts go out now, not with the next window
             yield
         with self.gui_lock:
@@ -297,8 +323,9 @@ class AnalysisView:
             if not self._showing(generation, serial):
                 return False
             self.panel_shown = (serial, shown)
-            self.panel_readouts.content = readouts_table(shown.readouts, shown.notes) if shown.readouts \
-                else "\n\n".join(f"*{note}*" for note in shown.notes)
+            self.panel_readouts.content = grouped_markdown(shown.readouts, shown.notes)
+            if self.shown_analysis is not None:       # its key readouts pinned above the scope too
+                self._show_readouts(self.shown_analysis)
             self.plots.update(shown.plots)
             self.client.flush()
         return True
@@ -311,18 +338,28 @@ class AnalysisView:
     def export_rows(self) -> list[tuple[str, object, str]]:
         """The readouts for a report: the Scope's with the scope window's, then the Analysis tab's
         if they belong to the current values."""
-        rows = self.readout_rows(self.shown_analysis)
-        serial, shown = self.panel_shown
-        if shown is not None and self.target is not None and serial == self.target[3]:
-            rows += shown.readouts
-        return rows
+        return self.readout_rows(self.shown_analysis) + self._analysis_tab_rows()
 
-    def readouts_markdown(self, result: Analysis) -> str:
-        return readouts_table(self.readout_rows(result), result.notes)
+    def _analysis_tab_rows(self) -> list[tuple[str, object, str]]:
+        """The Analysis tab's readouts if they belong to the current values, else none."""
+        serial, shown = self.panel_shown
+        current = shown is not None and self.target is not None and serial == self.target[3]
+        return list(shown.readouts) if current else []
+
+    def _show_readouts(self, result: Analysis) -> None:
+        """The key readouts above the charts and every readout below them (call holding ``gui_lock``);
+        unchanged texts are not sent again (exercises without scope readouts send nothing each second).
+        A key readout of the Analysis tab (a sweep: rotor_at_speed's critical speeds, kalman_noise's
+        largest gain factors) is not computed with every slider move: it is pinned once that tab has
+        computed it for the current values, a dash until then."""
+        rows = self.readout_rows(result)
+        keys = self.state.exercise.key_readouts
+        for handle, text in ((self.pinned, pinned_markdown(rows + self._analysis_tab_rows(), keys, KEY_ABSENT)),
+                             (self.readouts, grouped_markdown(rows, result.notes))):
+            if handle is not None and handle.content != text:
+                handle.content = text
 
     def refresh_live_readouts(self) -> None:
         """Redraw the readouts with the scope window's current figures (call holding ``gui_lock``)."""
         if self.shown_analysis is not None:
-            readouts = self.readouts_markdown(self.shown_analysis)
-            if readouts != self.readouts.content:     # exercises without scope readouts send nothing
-                self.readouts.content = readouts
+            self._show_readouts(self.shown_analysis)

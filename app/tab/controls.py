@@ -118,6 +118,16 @@ class Controls:
                 with self.state.lock:
                     self.state.values[name] = clamped
 
+    def follow_values(self, exercise: Exercise) -> None:
+        """Controls of values that follow from the others (``Exercise.following_values``, e.g. the Q22
+        a preset searched) show the value in use (issue 25: the box kept a Q22 the filter did not use)."""
+        parameters = {p.name: p for p in exercise.parameters}
+        for name, value in exercise.following_values(self.state.values_now()).items():
+            with self.state.lock:
+                self.state.values[name] = value
+            entry.show(self.entries.get(name), value)
+            self.put_slider(parameters[name], value)
+
     def typed(self, parameter: Parameter, box) -> None:
         """A value typed into ``parameter``'s box: refused with one line, or set through the slider."""
         with self.gui_lock:
@@ -147,6 +157,7 @@ class Controls:
         entry.show(self.entries.get(parameter.name), value)
         self.tell(None, "")
         self.apply(parameter, value)
+        self.follow_values(self.state.exercise)
 
     def refuse(self, parameter: Parameter, message: str) -> None:
         """A typed value that sets nothing (letters, empty, beyond the range) is refused, not clamped:

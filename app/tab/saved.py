@@ -42,6 +42,7 @@ class SavedExperiments:
         self.restored_from: str | None = None     # the browser's autosave this tab started from
         self.autosave_note = None                 # the notes in the "Saved experiment" folder
         self.saved_note = None
+        self.opened_note = ""                     # what Open did, for the folder of the exercise it opened
 
     def browser_autosave(self, exercises: dict):
         """The saved experiment whose code the browser keeps (``BROWSER_KEY``), or None."""
@@ -64,14 +65,15 @@ class SavedExperiments:
         """The "Saved experiment" folder; ``open_saved(code)`` opens the code typed."""
         if self.store is None:
             return
-        with gui.add_folder("Saved experiment", expand_by_default=False):
+        # open after an Open: the student sees what it did beside the button they used (issue 25)
+        with gui.add_folder("Saved experiment", expand_by_default=bool(self.opened_note)):
             self.autosave_note = gui.add_markdown("")
             code = gui.add_text("Experiment code", "", hint="A code such as KN-7Q3M-X9TA-HPRW from Save (any tab, "
                                                              "any day) or from your instructor.")
             actions = gui.add_button_group("Experiment", ("Save", "Open"))
             actions.on_click(on("experiment", lambda: self.save() if actions.value == "Save"
                                 else open_saved(code.value)))
-            self.saved_note = gui.add_markdown("")
+            self.saved_note = gui.add_markdown(self.opened_note)
 
     def changed(self) -> None:
         """Something worth keeping changed: autosave after ``AUTOSAVE_AFTER_S`` of quiet, or
@@ -144,8 +146,12 @@ class SavedExperiments:
                                        f"{escaped(saved.exercise)}, which this lab does not have.")
             return
         recording = (saved.recording_name, saved.recording) if saved.recording is not None else None
-        switch(exercise, saved.parameters, recording)
-        self.saved_note.content = f"Opened **{saved.code}**."
+        self.opened_note = f"Opened **{saved.code}**."
+        try:
+            switch(exercise, saved.parameters, recording)
+        finally:
+            self.opened_note = ""                 # shown by the new folder, or the switch failed
+        self.saved_note.content = f"Opened **{saved.code}**."   # the new folder's note, or this one's
 
     def show_codes(self) -> None:
         """The autosave note: where this tab's work was restored from and its autosave code."""

@@ -32,23 +32,22 @@ from collections.abc import Callable
 
 import viser
 
-from app.infra import layout, viser_internals
+from app.infra import layout
 from app.infra.access import Limits
 from app.infra.store import Store
-from app.infra.traffic import callback
-from app.panels import entry, filter_branch, page_query, scope, worksheets
+from app.panels import entry, filter_branch, page, page_query, scope, worksheets
 from app.panels.actions import ActionPanel
 from app.panels.docks import Docks
-from app.panels.export import ExportButtons
+from app.panels.export import ExportButtons, add_download
 from app.panels.filter_debugger import FilterDebugger
 from app.panels.inspector import FilterInspector
 from app.panels.live import LivePlots
 from app.panels.plots import plot_chart
 from app.panels.scene_view import SceneView
-from app.panels.scope_charts import ScopeCharts
-from app.panels.status import PAUSED, RUNNING, SimulationStatus
+from app.panels.scope_charts import TIME_AXES, ScopeCharts, time_axis_choice
+from app.panels.status import PAUSED, RUNNING, SimulationStatus, stopped
 from app.panels.text import escaped
-from app.tab.analysis_view import WORKSHEET, WORKSHEET_BESIDE, AnalysisView
+from app.tab.analysis_view import AnalysisView
 from app.tab.assignment import AssignmentTab
 from app.tab.controls import Controls
 from app.tab.gate import TokenGate
@@ -57,7 +56,7 @@ from app.tab.saved import SavedExperiments
 from app.tab.state import LabState
 from app.tab.streaming import Problems, Stream
 from app.tab.worker import TabClosed, TabWorker
-from lab_modules.exercises import ANALYSIS, POLE_MAP, Exercise, registry
+from lab_modules.exercises import Exercise, registry
 from lab_modules.parameters import Parameter, ParameterError
 
 #: An exercise switch waits this long between the last chart update and the removals: a busy browser
@@ -107,7 +106,10 @@ class LabSession:
         self.stream: Stream | None = None
         self.inspector: FilterInspector | None = None
         self.debugger: FilterDebugger | None = None
-        self.download_note = None                 # what the exercise's download button did
+        self.upload_note = None                   # what its upload button did
+        self.time_axis = TIME_AXES[0]             # the scope's time axis, the student's choice for every exercise
+        # the browser reports the 3D view's size with every camera update (also on a resize)
+        client.camera.on_update(lambda _camera: self.post("canvas", self._fit_scene))
         self.worker.start(lambda: self._work(exercise))
 
     @property
@@ -201,9 +203,11 @@ class LabSession:
         self.scene = exercise.scene(self.state.values)
         self._build_gui(exercise)
         self.controls.follow_ranges(exercise)
+        self.controls.follow_values(exercise)
         self.worker.check_open()
         if self.scene is not None:
             self.scene.attach(self.client.scene)
+            self._fit_scene(attached=True)
         self.worker.check_open()
         self._request_analysis()
         self.stream.start()
@@ -290,12 +294,16 @@ class LabSession:
                                    initial_value=exercise.title,
                                    hint="Switch this tab to another exercise (starts it on its defaults).")
         chooser.on_update(on("exercise", lambda: self._choose(chooser.value)))
+        # beside the chooser: Open switches the exercise, and its note is in view wherever it lands
+        self.saved.add_folder(gui, on, lambda code: self.saved.open(code, self.exercises, self._switch))
+        self.saved.show_codes()
         gui.add_markdown(f"### {exercise.title}")
         self.assignment.add_panel(gui, exercise)  # a student's assignment: Submit and the results
         self.status.add_line(gui)
         buttons = gui.add_button_group("Simulation", ("Run", "Pause", "Reset"))
         buttons.on_click(on("buttons", lambda: self._on_button(buttons.value)))
         self.status.add_speed(gui)                # filled in while it runs
+        self.controls.add_error_line(gui)         # under the buttons, in view (not at the foot of the controls)
         self.inspector = FilterInspector.add(gui, self.state.simulation, on("inspector step", self._step_one))
         self.debugger = FilterDebugger.add(gui, self.state.simulation, on, keep=lambda q, r, model: filter_branch.keep(
             self.state.exercise, self.state.values_now(), model, q, r, self.controls.follow))
@@ -308,38 +316,34 @@ class LabSession:
             upload = gui.add_upload_button("Load recording (CSV)", icon=viser.Icon.UPLOAD, mime_type=".csv,text/csv",
                                            hint=exercise.data_description)
             upload.on_upload(on("upload", lambda: self._on_upload(upload.value)))
+            self.upload_note = gui.add_markdown("")       # what the upload did, right under the button
         if exercise.download_label:
-            download = gui.add_button(exercise.download_label, icon=viser.Icon.DOWNLOAD)
-            download.on_click(on("download", self._on_download))
-            self.download_note = gui.add_markdown("")     # what the button did, where the student looks
+            add_download(gui, exercise, on, self.state.values_now, self.client)
         self.controls.add(gui, exercise, values)
         self.assignment.fix(self.controls.inputs, self.controls.entries, chooser)
         gui.add_html(scope.LEGEND_STYLE)
         gui.add_html(entry.STYLE)
-        self.controls.add_error_line(gui)
-        self.saved.add_folder(gui, on, lambda code: self.saved.open(code, self.exercises, self._switch))
-        self.saved.show_codes()
+        gui.add_html(page.STYLE)
+        gui.add_markdown(page.title_markdown(exercise.title))   # the browser tab's title
 
         first = self.analysis.first(exercise, values)
         self.docks.dock(gui)
         tabs = self.docks.tabs
         with tabs["Scope"]:
+            self.analysis.add_pinned(gui)              # first: in view at 1366 x 768 above any live plot
             live = LivePlots(gui, exercise, self.state.simulation)   # if the exercise has any
-            charts = ScopeCharts(gui, exercise.charts, self.state.columns, self.state.window_ms())
+            time_axis = time_axis_choice(gui, self.time_axis)
+            charts = ScopeCharts(gui, exercise.charts, self.state.columns, self.state.window_ms(), self.time_axis)
+            time_axis.on_update(on("time axis", lambda: self._set_time_axis(charts, time_axis.value)))
             self.analysis.add_readouts(gui, first)
             ExportButtons.add(gui, exercise, on, self._export_snapshot, self.analysis.export_rows,
                               self.client.send_file_download)   # CSV and PNG for a lab report
         with tabs["Pole map"]:
-            self._add_beacon(gui, POLE_MAP)
             self.analysis.add_pole_map(gui, tabs["Pole map"], on)
         with tabs["Analysis"]:
-            self._add_beacon(gui, ANALYSIS)
             self.analysis.add_analysis_tab(gui, tabs["Analysis"])
         self.docks.add_worksheets(gui, worksheets.current(exercise))   # claims table filled in as measured
-        for place, name in (("Worksheet", WORKSHEET), ("beside", WORKSHEET_BESIDE)):
-            if place in tabs:
-                with tabs[place]:
-                    self._add_beacon(gui, name)
+        self.analysis.add_worksheet_beacons(gui, tabs)
         self.stream = Stream(self.client, self.gui_lock, self.state, self.generation, self._current, self.scene,
                              self.scene_view, charts, live, self.status, self.analysis.refresh_live_readouts,
                              self.problems)
@@ -365,11 +369,21 @@ class LabSession:
             if self._current(generation):
                 self.docks.show_worksheet(sheet)
 
-    def _add_beacon(self, gui, panel: str) -> None:
-        """The browser says when this panel tab is shown or hidden (its analyses are computed then);
-        recorded at once on the event loop, not behind the tab's other events."""
-        viser_internals.visibility_beacon(gui, panel, callback(lambda _: self.analysis.set_shown(panel, True)),
-                                          callback(lambda _: self.analysis.set_shown(panel, False)))
+    def _set_time_axis(self, charts: ScopeCharts, time_axis: str) -> None:
+        """The scope's time axis, kept for the tab's next exercises too."""
+        self.time_axis = time_axis
+        with self.gui_lock, self.docks.tabs["Scope"]:
+            if not self.closed and self.stream is not None and self.stream.scope is charts:
+                charts.set_time_axis(self.client.gui, time_axis, self.state.window_ms())
+                self.stream.draw(time.perf_counter())   # also while paused
+
+    def _fit_scene(self, attached: bool = False) -> None:
+        """Fold the 3D view away while the window leaves it no room (a cut-off strip at 1024 x 768), show
+        it again once there is (``attached``: its scene is new)."""
+        with self.gui_lock:
+            if self.scene is not None and not self.closed:
+                camera = self.client.camera
+                self.scene_view.fit(self.client.scene, camera.image_width, camera.image_height, attached)
 
     def _still_current(self) -> Callable[[], bool]:
         """Whether the generation being built still owns the tab (for parts that run on threads)."""
@@ -395,13 +409,14 @@ class LabSession:
             return
         self._request_analysis()                  # readouts first: they are what the student watches
         with lab.lock:
-            if parameter.name == "seed" or lab.simulation.status_message():
-                lab.reset()                       # a stopped run is not carried on (it touched down)
-            else:
+            restart = lab.restart_after(parameter.name)
+            if not restart:
                 step_s = lab.simulation.sample_time_s
                 lab.simulation = lab.exercise.retune(lab.simulation, lab.values)
                 if lab.simulation.sample_time_s != step_s:
                     lab.buffer = lab.buffer[:0]   # the scope's rows assume one sample time
+        if restart:
+            self._show_restarted()
         if self.scene is not None:
             try:
                 self.scene.update(dict(lab.values))
@@ -409,34 +424,30 @@ class LabSession:
                 self.problems.report("3D view", error)
 
     def _on_upload(self, uploaded) -> None:
+        """Load an uploaded file; the note under the button says what happened (issue 25: it used to
+        appear at the foot of the controls, out of view)."""
         lab = self.state
         try:
             data = lab.exercise.load_data(uploaded.name, uploaded.content)
         except ParameterError as error:
             named = str(error) if uploaded.name in str(error) else f"{uploaded.name}: {error}"
-            self.controls.error.content = f"⚠️ {escaped(named)}"
+            self.upload_note.content = f"⚠️ Not loaded: {escaped(named)}"
             return
-        self.controls.error.content = f"Loaded {escaped(uploaded.name)}."
+        rows = f" {len(data)} rows;" if hasattr(data, "__len__") else ""   # a recording's
+        self.upload_note.content = f"✓ Loaded {escaped(uploaded.name)}.{rows} the run starts again with it."
         with lab.lock:
             lab.values["data"] = data
-            lab.reset()
+            lab.restart()
+        self._show_restarted()
         lab.recording = (uploaded.name, uploaded.content)
         self.controls.follow_ranges(lab.exercise)
         self.saved.changed()
         self._request_analysis()
 
-    def _on_download(self) -> None:
-        """Make the file; the note under the button says what happened (issue 11, defect 5: the
-        reason a recording failed used to appear below the fold of the left panel)."""
-        self.download_note.content = "*Preparing the file …*"
-        self.client.flush()
-        try:
-            filename, content = self.state.exercise.download(self.state.values_now())
-        except ParameterError as error:
-            self.download_note.content = f"⚠️ {escaped(error)}"
-            return
-        self.client.send_file_download(filename, content, save_immediately=True)
-        self.download_note.content = f"Sent {escaped(filename)} ({len(content) / 1e3:.0f} kB)."
+    def _show_restarted(self) -> None:
+        with self.gui_lock:
+            if not self.closed:
+                self.stream.show_restarted()
 
     def _on_button(self, which: str) -> None:
         lab = self.state
@@ -459,7 +470,7 @@ class LabSession:
         with self.gui_lock:
             if self.closed:
                 return
-            self.status.line.content = (f"**Stopped: {message}** Press Run or Reset to start again." if message
+            self.status.line.content = (stopped(message) if message
                                         else "**Paused** (stepping one sample at a time)")
             self.stream.draw(time.perf_counter())
             self._refresh_inspector()

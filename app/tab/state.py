@@ -56,6 +56,22 @@ class LabState:
         self.simulation = self.exercise.simulation(self.values)
         self.buffer = self.buffer[:0]
 
+    def restart(self) -> None:
+        """A new run at the current values, running at once (call holding ``lock``): after a change
+        that invalidates the shown run, the scope never keeps a run the readouts no longer describe."""
+        self.reset()
+        self.running = True
+
+    def restart_after(self, name: str) -> bool:
+        """Restart the run after a change of parameter ``name`` where the change invalidates it: a new
+        seed, an exercise that replays afresh on every change (``Exercise.restarts_on_change``), a
+        stopped run (it touched down: not carried on), also when paused; whether it restarted (call
+        holding ``lock``)."""
+        if name == "seed" or self.exercise.restarts_on_change or self.simulation.status_message():
+            self.restart()
+            return True
+        return False
+
     def append(self, trace: np.ndarray) -> None:
         """New samples into the scope window (call holding ``lock``)."""
         self.buffer = scope.append(self.buffer, trace, self.window_rows())

@@ -58,6 +58,13 @@ class Stream:
     def alive(self) -> bool:
         return self.ticker is not None and self.ticker.is_alive()
 
+    def show_restarted(self) -> None:
+        """After a change restarted the run: running again, the stop card gone (call holding ``gui_lock``)."""
+        if not self.alive():
+            self.start()                          # never left without a simulation
+        self.status.clear_card()
+        self.status.line.content = status_texts.RUNNING
+
     def join(self, timeout: float) -> None:
         if self.ticker is not None:
             self.ticker.join(timeout)

@@ -27,12 +27,15 @@ class Series:
 
 @dataclass(frozen=True)
 class Chart:
-    """A rolling oscilloscope chart; ``band`` = (centre column, sigma column) draws ±3σ."""
+    """A rolling oscilloscope chart; ``band`` = (centre column, sigma column) draws ±3σ.
+    ``band_in_range`` False: the y range follows the series alone and the band is cut at its
+    edges (a filter's wide starting band would squash the estimate's detail)."""
 
     title: str
     unit: str
     series: tuple[Series, ...]
     band: tuple[str, str] | None = None
+    band_in_range: bool = True
 
 
 @dataclass(frozen=True)
@@ -198,6 +201,10 @@ class Exercise:
     #: (parameter, pole set): a common gain factor and the closed-loop set of ``Analysis.poles`` it
     #: moves; the pole map draws that set's paths as the factor sweeps its range (root locus)
     locus: tuple[str, str] | None = None
+    #: Labels of the readouts the worksheet's tasks name (a scope-window readout's without its
+    #: " (scope window)"): pinned above the scope, in view without scrolling (tested to exist)
+    key_readouts: tuple[str, ...] = ()
+
     def resolve(self, overrides: dict | None = None) -> dict:
         overrides = dict(overrides or {})
         data = overrides.pop("data", None)
@@ -237,12 +244,23 @@ class Exercise:
         """The simulation after a parameter change; by default a fresh one."""
         return self.simulation(values)
 
+    @property
+    def restarts_on_change(self) -> bool:
+        """Whether a parameter change starts a fresh run (the default ``retune``), so the run
+        shown so far no longer belongs to the values."""
+        return type(self).retune is Exercise.retune
+
     def metrics(self, values: dict, duration_s: float) -> dict:
         raise NotImplementedError
 
     def parameter_ranges(self, values: dict) -> dict[str, tuple[float, float]]:
         """Narrower (minimum, maximum) of parameters whose valid range depends on the other values,
         e.g. on the loaded recording's length; the tab's sliders follow them."""
+        return {}
+
+    def following_values(self, values: dict) -> dict:
+        """Parameters whose value in use follows from the others (e.g. a preset that sets a
+        slider's quantity itself), by name; the tab's controls show these values."""
         return {}
 
     def locus_matrices(self, values: dict, factors: tuple[float, ...]) -> tuple[list[np.ndarray], float | None]:

@@ -23,6 +23,7 @@ from lab_modules.plants.radial_bearing import RIG
 
 T = RIG.sample_time_s
 PLOT_POINTS = 500
+NO_OVERSHOOT = "none (never reaches the reference)"   # the overshoot readout of a step that stays below
 
 
 def step_tests_at(values: dict, loops: dict[str, AxisSetup]) -> dict[str, dict]:
@@ -50,6 +51,8 @@ def step_readouts(tests: dict, linear: dict) -> list[tuple]:
         word = "touched down" if tests[name]["stops"] else "not reached"
         r = {key: (word if isinstance(value, float) and not np.isfinite(value) else value)
              for key, value in tests[name].items()}
+        if not isinstance(r["reference_overshoot_percent"], str) and r["reference_overshoot_percent"] < 0:
+            r["reference_overshoot_percent"] = NO_OVERSHOOT   # a negative overshoot is no figure to read
         f = linear[name]
         readouts += [
             (f"{name}: overshoot, reference step", r["reference_overshoot_percent"], "%"),

@@ -81,7 +81,7 @@ def analysis(setup: SelfSensingSetup) -> tuple[list, list, list]:
     readouts = [
         (f"Straight-ramp σ(ŝ) {tag} (eq. 30-32)", straight_ramp_sigma_gap_m(ball, gap, setup) * 1e6, "µm"),
         (f"Coil time constant L/R {tag}", coil_time_constant_s(ball, gap) * 1e3, "ms"),
-        ("Reluctance slope of the air gap ∂R_s/∂s", ball.gap_reluctance_slope_per_h_m, "1/(H·m)"),
+        ("Gap reluctance slope ∂R_s/∂s (eq. 1)", ball.gap_reluctance_slope_per_h_m, "1/(H·m)"),
         (f"R_s/R_l {tag}", gap * ball.gap_reluctance_slope_per_h_m / ball.leakage_reluctance_per_h, ""),
     ]
     notes = [("Design trade-off (after eq. 32): each curve scales one of N, A_s, R_l of the current settings "

@@ -114,8 +114,8 @@ def live_readouts(trace: dict[str, np.ndarray], last_periods: int) -> list[tuple
     return [
         ("True L (newest period)", float(trace["inductance_true_h"][-1] * 1e3), "mH"),
         ("L̄ (newest period)", float(trace["inductance_mean_h"][-1] * 1e3), "mH"),
-        ("Inductance ratio μ̂, mean (eq. 22)", float(np.mean(trace["inductance_ratio"][last])), ""),
-        ("Voltage gain η̂, mean (eq. 22)", float(np.mean(trace["voltage_gain_estimate"][last])), ""),
+        ("L̄/L, the estimate μ̂ (mean; eq. 22)", float(np.mean(trace["inductance_ratio"][last])), ""),
+        ("L/L̄, the estimate η̂ (mean; eq. 22)", float(np.mean(trace["voltage_gain_estimate"][last])), ""),
         ("Position bias ŝ − s (mean)", float(np.mean(trace["gap_error_m"][last]) * 1e6), "µm"),
         ("Duty χ", float(trace["duty"][-1]), ""),
         ("Δiᴵ", float(trace["delta_current_1_a"][-1] * 1e3), "mA"),

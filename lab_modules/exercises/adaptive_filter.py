@@ -372,6 +372,8 @@ class AdaptiveFilter(Exercise):
     parameters = PARAMETERS
     default_duration_s = PERIOD_S
     claims = CLAIMS
+    key_readouts = ("F̂_St bias, fixed k_i, k_s, point 1", "F̂_St bias, fixed k_i, k_s, point 2",
+                    "x̂ RMS ratio scheduled / fixed", "Filter's own σ_x (steady, centre model)")
     charts = (
         Chart("Disturbance force F_St (±3σ: scheduled filter)", "N", (
             Series("true", "disturbance_n", 1.0, "#1f77b4"),
@@ -461,6 +463,13 @@ class AdaptiveFilter(Exercise):
 
     def retune(self, simulation: AdaptiveFilterSimulation, values: dict) -> AdaptiveFilterSimulation:
         return simulation.retuned(values)
+
+    def report_figures(self, values: dict) -> list:
+        """Figs. 15-16's scenario: the force and position estimate errors of the fixed, scheduled
+        and EKF filters at the two operating points."""
+        from lab_modules.exercises._figures import analysis_plots, plot_figure
+        return [plot_figure(plot) for plot in analysis_plots(self, values, (
+            "Disturbance-force estimate error", "Position estimate error"))]
 
     def metrics(self, values: dict, duration_s: float) -> dict:
         trace, status = run(values, max(duration_s, PERIOD_S))

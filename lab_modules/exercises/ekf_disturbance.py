@@ -279,6 +279,8 @@ class EkfDisturbance(Exercise):
     min_duration_s = 0.1             # the force step comes at STEP_TIME_S = 0.05 s; 50 ms of its response
     claims = CLAIMS
     locus = ("pid_gain", CLOSED_LOOP)
+    key_readouts = ("Force estimate settling (±5 %)", "Force estimate noise σ",
+                    "Peak displacement after the step")
     charts = (
         Chart("Disturbance force f_z", "N", (
             Series("estimate", "force_estimated_n", 1.0, "#d62728"),

@@ -238,6 +238,9 @@ class KalmanNoise(Exercise):
     parameters = PARAMETERS
     claims = CLAIMS
     locus = ("gain_factor", "closed loop")
+    key_readouts = ("RMS displacement, measured feedback", "RMS displacement, estimated feedback",
+                    "Reduction by the filter", "Largest gain factor, measured",
+                    "Largest gain factor, estimated")
     charts = (
         Chart("Rotor position", "µm", (
             Series("measured", "x_measured_m", 1e6, "#b0b0b0"),

@@ -80,6 +80,7 @@ from lab_modules.exercises._lqg_vs_pid_fronts import (
     stiffness_at,
 )
 from lab_modules.exercises._lqg_vs_pid_steps import (
+    NO_OVERSHOOT,
     scaled,
     step_and_loop_figures,
     step_plots,
@@ -111,8 +112,8 @@ from lab_modules.scenes.bearing import ESTIMATE_RED, TRUE_BLUE, BearingScene, Gh
 
 #: The names this module offers: the exercise with its parameters and claims, its two loops and
 #: their figures, and the step-test and trade-off-front functions it is built from.
-__all__ = ["CLAIMS", "EXERCISE", "FRONT_LQG_FACTORS", "LARGEST_STEP_RESOLUTION_N", "PARAMETERS", "cost_of",
-           "disturbance_step_figures", "fronts", "largest_disturbance_step", "loop_figures", "pareto",
+__all__ = ["CLAIMS", "EXERCISE", "FRONT_LQG_FACTORS", "LARGEST_STEP_RESOLUTION_N", "NO_OVERSHOOT", "PARAMETERS",
+           "cost_of", "disturbance_step_figures", "fronts", "largest_disturbance_step", "loop_figures", "pareto",
            "regulator", "setups", "side_by_side", "stiffness_at"]
 
 T = RIG.sample_time_s
@@ -252,6 +253,9 @@ class LqgVsPid(Exercise):
         Claim("paper 000 §IV, Fig. 8", "PID overshoot, 50 µm reference step", "large, long transient",
               "overshoot_pid_percent", (20, None), "%", duration_s=0.2),
     )
+    key_readouts = ("Ratio filter / regulator", "LQG: overshoot, reference step",
+                    "PID: overshoot, reference step", "LQG: step stiffness Δf/x_max (linear)",
+                    "PID: step stiffness Δf/x_max (linear)")
     charts = (
         Chart("Rotor position", "µm", (
             Series("reference", "reference_m", 1e6, COLORS["reference"]),

@@ -189,6 +189,8 @@ class MaglevTracking(Exercise):
     min_duration_s = 1.1             # the 2 mm step comes at 0.75 s; its error is measured SETTLE_S after
     claims = CLAIMS
     download_label = "Record a lead-lag run (CSV)"
+    key_readouts = ("Feedback gain k1", "Feedback gain k2", "Feedback gain k3", "Position error inside ±3σ",
+                    "Velocity error inside ±3σ")
     charts = (
         Chart("Gap x1", "mm", (
             Series("measured", "x_measured_m", 1e3, "#c0c0c0"),

@@ -51,6 +51,10 @@ NIS_PLOT_DECADES = 10       # the windowed-NIS plot's log axis reaches this far 
 CONVERGENCE_S = 0.5         # NIS and whiteness are judged after the filter's start-up transient
 MAX_LAG = 50                # innovation autocorrelation lags shown and tested
 Q_PRESETS = ("eq_3.4", "table_3.1", "custom", "nis_tuned")
+#: The values the NIS-tuned Q22 depends on besides the recording (the search's cache key)
+NIS_TUNING_INPUTS = ("still_start_s", "still_end_s", "r_source", "filter_sensor_noise_mm", "q_position",
+                     "q_current", "initial_covariance")
+NIS_TUNED_KEPT = 32         # searches kept (recording, setting) -> Q22
 
 P = Parameter
 PARAMETERS = (
@@ -82,6 +86,9 @@ PARAMETERS = (
 )
 
 
+_nis_tuned: dict[tuple, tuple[recordings.Recording, float]] = {}
+
+
 def filter_q(values: dict) -> np.ndarray:
     """The filter's Q(t) of eq. 2.45 [m²/s, m²/s³, A²/s] for the chosen preset."""
     Q = preset_q(values)
@@ -91,11 +98,16 @@ def filter_q(values: dict) -> np.ndarray:
 
 
 def nis_tuned_q_velocity(rec, values: dict) -> float:
-    """Q22 that makes the mean NIS 1 (log-bisection over the slider's range).
+    """Q22 that makes the mean NIS 1 (log-bisection over the slider's range), kept per recording
+    and setting of the values it depends on (the search runs the observer 16 times).
 
     Too small a Q22 makes the filter overconfident (NIS > 1), too large a one
     makes it pessimistic (NIS < 1): the search automates what the paper did
     by hand "after several iterations" (§3.5.2)."""
+    key = (id(rec), *(values[name] for name in NIS_TUNING_INPUTS))
+    kept = _nis_tuned.get(key)
+    if kept is not None and kept[0] is rec:       # the same recording, not one that reused its id
+        return kept[1]
     low, high = np.log10(1e-12), np.log10(1.0)
     for _ in range(16):                      # 12 decades / 2^16: Q22 to within 0.05 %
         middle = 0.5 * (low + high)
@@ -104,7 +116,11 @@ def nis_tuned_q_velocity(rec, values: dict) -> float:
             low = middle
         else:
             high = middle
-    return float(10 ** (0.5 * (low + high)))
+    tuned = float(10 ** (0.5 * (low + high)))
+    if len(_nis_tuned) >= NIS_TUNED_KEPT:
+        _nis_tuned.pop(next(iter(_nis_tuned)))
+    _nis_tuned[key] = (rec, tuned)
+    return tuned
 
 
 @functools.cache
@@ -254,6 +270,9 @@ class MaglevTuning(Exercise):
     claims = CLAIMS
     data_description = ("A maglev recording (CSV): header time_s, reference_mm, measured_position_mm, "
                         "coil_voltage_v; time increasing; '#' lines are comments.")
+    key_readouts = ("Sensor noise σ from the still segment (eq. 3.3)", "Q22 used by the filter", "Mean NIS",
+                    f"{NIS_WINDOW}-sample NIS windows inside 95 % bounds",
+                    "Innovation autocorrelation inside its 95 % white-noise bound (lags 1-50)")
     charts = (
         Chart("Gap x1", "mm", (
             Series("measured", "x_measured_m", 1e3, "#b0b0b0"),
@@ -282,6 +301,12 @@ class MaglevTuning(Exercise):
         """The still-segment sliders span the loaded recording, not the parameters' 0 ... 3600 s."""
         first, last = still_range_s(recording(values))
         return {"still_start_s": (first, last), "still_end_s": (first, last)}
+
+    def following_values(self, values: dict) -> dict:
+        """With the NIS-tuned preset the Q22 box shows the Q22 the search found (the filter's own)."""
+        if values["q_preset"] != "nis_tuned":
+            return {}
+        return {"q_velocity": nis_tuned_q_velocity(recording(values), values)}
 
     def model(self, values: dict) -> dict:
         rec = recording(values)
@@ -472,7 +497,7 @@ class Replay:
             return ""
         if self.diverged:
             return "Stopped: the filter diverged on this recording (its estimate is no longer finite)."
-        return "End of the recording: press Reset to replay it."
+        return "End of the recording (Reset replays it)."
 
 
 EXERCISE = MaglevTuning()

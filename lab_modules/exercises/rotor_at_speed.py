@@ -348,6 +348,9 @@ class RotorAtSpeed(Exercise):
     parameters = PARAMETERS
     default_duration_s = 0.3
     claims = CLAIMS
+    key_readouts = ("Closed loop at this speed", "Critical speed 1 (forward whirl meets 1× spin)",
+                    "Unbalance: peak orbit at the bearing, 0-12,000 rpm", "Unbalance: speed of that peak",
+                    "Largest orbit radius at the bearing", "Speed now")
     charts = (
         Chart("Rotor position", "µm", (
             Series("bearing x (x-z plane)", "x_bearing_m", 1e6, "#1f77b4"),
@@ -423,7 +426,7 @@ class RotorAtSpeed(Exercise):
 
     def live_readouts(self, trace: dict[str, np.ndarray]) -> list[tuple[str, float, str]]:
         radius = np.hypot(trace["x_bearing_m"], trace["y_bearing_m"])
-        return [("Largest orbit radius at the bearing (window)", float(np.max(radius)) * 1e6, "µm"),
+        return [("Largest orbit radius at the bearing", float(np.max(radius)) * 1e6, "µm"),
                 ("RMS filter innovation", float(np.sqrt(np.mean(trace["innovation_m"] ** 2))) * 1e6, "µm"),
                 ("Speed now", float(trace["speed_rpm"][-1]), "rpm")]
 
@@ -519,19 +522,20 @@ def at_set_speed(values: dict) -> Analysis:
                 ("Closed loop at this speed", "stable" if at_speed.stable[0] else "unstable", "")]
     for j in range(min(n, 3)):
         for d, direction in ((0, "backward"), (1, "forward")):
-            readouts += [(f"Mode {j + 1} {direction} whirl: frequency", at_speed.whirl_hz[0, j, d], "Hz"),
-                         (f"Mode {j + 1} {direction} whirl: damping ratio", 100 * at_speed.damping[0, j, d], "%")]
+            whirl = f"Closed loop at this speed: mode {j + 1} {direction} whirl"
+            readouts += [(f"{whirl}, frequency", at_speed.whirl_hz[0, j, d], "Hz"),
+                         (f"{whirl}, damping ratio", 100 * at_speed.damping[0, j, d], "%")]
     for j in range(1, min(n, 3)):
         for d, direction in ((0, "backward"), (1, "forward")):
-            label = f"Rotor on its ball bearing at {CAMPBELL_SPEEDS_RPM[here]:.0f} rpm, mode {j + 1} {direction} whirl"
+            label = f"Rotor on its ball bearing at {CAMPBELL_SPEEDS_RPM[here]:.0f} rpm: mode {j + 1} {direction} whirl"
             readouts.append((label, (-1, 1)[d] * free[j, d], "Hz"))
     readouts += [
-        (f"Unbalance U ({values['balance_grade']})", unbalance_kg_m(values) * 1e6, "g·mm"),
-        ("Unbalance force at this speed", unbalance_kg_m(values) * float(np.pi * speed / 30) ** 2, "N"),
-        ("Unbalance orbit at the bearing, this speed", bearing_here * 1e6, "µm"),
-        ("Unbalance orbit at the sensor, this speed", abs(response_here[LOOP_OUTPUTS.index("r_sensor_m")]) * 1e6, "µm"),
-        ("Unbalance control current amplitude, this speed", abs(response_here[LOOP_OUTPUTS.index("current_a")]), "A"),
-        ("ISO 14839-2 at this speed",
+        (f"Unbalance: U ({values['balance_grade']})", unbalance_kg_m(values) * 1e6, "g·mm"),
+        ("Unbalance: force at this speed", unbalance_kg_m(values) * float(np.pi * speed / 30) ** 2, "N"),
+        ("Unbalance: orbit at the bearing, this speed", bearing_here * 1e6, "µm"),
+        ("Unbalance: orbit at the sensor, this speed", abs(response_here[LOOP_OUTPUTS.index("r_sensor_m")]) * 1e6, "µm"),
+        ("Unbalance: control current amplitude, this speed", abs(response_here[LOOP_OUTPUTS.index("current_a")]), "A"),
+        ("Unbalance: ISO 14839-2 at this speed",
          f"zone {iso_14839_2_zone(bearing_here, in_si(PARAMETERS, values)['clearance_um'])}", ""),
     ]
     notes = [(f"Sensor: {sensor_name(offset)} at {offset:+.0f} mm from the bearing plane; feedback: "
@@ -563,12 +567,12 @@ def over_speed(values: dict):
     midspan = midspan_orbit_m(values, closed)
     readouts = ([(f"Critical speed {k + 1} (forward whirl meets 1× spin)", c, "rpm") for k, c in enumerate(criticals)]
                 or [("Critical speeds below 12,000 rpm", "none", "")])
-    readouts += [("Peak unbalance orbit at the bearing, 0-12,000 rpm", peak_m * 1e6, "µm"),
-                 ("Speed of that peak", CAMPBELL_SPEEDS_RPM[peak], "rpm"),
-                 ("ISO 14839-2 at that peak", f"zone {iso_14839_2_zone(peak_m, clearance)}", ""),
-                 (f"Peak unbalance orbit at mid-span, {MIDSPAN_M * 1e3:.0f} mm along the shaft", np.max(midspan) * 1e6,
-                  "µm"),
-                 ("Speed of the mid-span peak", CAMPBELL_SPEEDS_RPM[np.argmax(midspan)], "rpm")]
+    readouts += [("Unbalance: peak orbit at the bearing, 0-12,000 rpm", peak_m * 1e6, "µm"),
+                 ("Unbalance: speed of that peak", CAMPBELL_SPEEDS_RPM[peak], "rpm"),
+                 ("Unbalance: ISO 14839-2 at that peak", f"zone {iso_14839_2_zone(peak_m, clearance)}", ""),
+                 (f"Unbalance: peak orbit at mid-span, {MIDSPAN_M * 1e3:.0f} mm along the shaft",
+                  np.max(midspan) * 1e6, "µm"),
+                 ("Unbalance: speed of the mid-span peak", CAMPBELL_SPEEDS_RPM[np.argmax(midspan)], "rpm")]
     plots = [campbell_plot(values, free, swept, criticals)]
     yield Analysis(readouts + [("Stability limits against speed", "computing …", "")], {}, [],
                    plots + [unbalance_plot(values, response, midspan)])

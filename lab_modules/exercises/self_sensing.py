@@ -248,6 +248,8 @@ class SelfSensing(Exercise):
         "position loop for ISO 14839-3 to grade.  The per-period duty rule sets the next period's "
         "flux from the model and the present flux (a one-period dead-beat, S = 1 − z⁻¹ whatever the "
         "settings), so its margins would say nothing about the estimator.")
+    key_readouts = ("At 4 mm: L̂ᴵ error", "At 4 mm: L̂ᴵᴵ error", "At 4 mm: L̄/L", "At 4 mm: position bias",
+                    "At 4 mm: σ̂(L̄) (eq. 31)")
     charts = (
         Chart("Inductance", "mH", (
             Series("L̄ (eq. 18)", "inductance_mean_h", 1e3, "#d62728"),
@@ -302,7 +304,7 @@ class SelfSensing(Exercise):
         readouts, poles, runs = [], {}, {}
         for gap in GAPS:
             gap_m = s.gap_1_m if gap == "gap_1" else s.gap_2_m
-            tag = f"at {gap_m * 1e3:g} mm"
+            at = f"At {gap_m * 1e3:g} mm: "                  # the group a long list folds
             inductance = float(s.rig.inductance_h(gap_m))
             current = float(s.rig.equilibrium_current_a(gap_m))
             rows = stationary(values, gap, periods=300)
@@ -314,24 +316,24 @@ class SelfSensing(Exercise):
                     for v, m in zip((v_bat - s.rig.coil_resistance_ohm * current,
                                      v_bat + s.rig.coil_resistance_ohm * current), windows)]
             readouts += [
-                (f"L {tag} (eq. 2)", inductance * 1e3, "mH"),
-                (f"Equilibrium current {tag}", current, "A"),
-                (f"Duty χ {tag}", st["duty"], ""),
-                (f"Δiᴵ {tag}", st["delta_current_ma"][0], "mA"),
-                (f"Δiᴵᴵ {tag}", st["delta_current_ma"][1], "mA"),
-                (f"Weight wᴵ {tag} (eq. 18)", st["weights"][0], ""),
-                (f"Weight wᴵᴵ {tag} (eq. 18)", st["weights"][1], ""),
-                (f"L̂ᴵ error {tag}", st["half_period_error_percent"]["phase_1"], "%"),
-                (f"L̂ᴵᴵ error {tag}", st["half_period_error_percent"]["phase_2"], "%"),
-                (f"L̄/L {tag}", st["inductance_ratio"], ""),
-                (f"Position bias {tag}", st["position_bias_um"], "µm"),
-                (f"σ̂(i) {tag} (eq. 28)", st["sigma_current_ma"], "mA"),
-                (f"σ̂(L̂ᴵ) {tag} (eq. 30)", st["predicted_sigma_half_period_uh"]["phase_1"], "µH"),
-                (f"σ̂(L̂ᴵᴵ) {tag} (eq. 30)", st["predicted_sigma_half_period_uh"]["phase_2"], "µH"),
-                (f"Straight-ramp σ(L̂ᴵ) {tag}", ramp[0] * 1e6, "µH"),
-                (f"Straight-ramp σ(L̂ᴵᴵ) {tag}", ramp[1] * 1e6, "µH"),
-                (f"σ̂(L̄) {tag} (eq. 31)", st["predicted_sigma_inductance_uh"], "µH"),
-                (f"σ̂(ŝ) {tag} (eq. 32)", st["predicted_sigma_position_um"], "µm"),
+                (f"{at}L (eq. 2)", inductance * 1e3, "mH"),
+                (f"{at}equilibrium current", current, "A"),
+                (f"{at}duty χ", st["duty"], ""),
+                (f"{at}Δiᴵ", st["delta_current_ma"][0], "mA"),
+                (f"{at}Δiᴵᴵ", st["delta_current_ma"][1], "mA"),
+                (f"{at}weight wᴵ (eq. 18)", st["weights"][0], ""),
+                (f"{at}weight wᴵᴵ (eq. 18)", st["weights"][1], ""),
+                (f"{at}L̂ᴵ error", st["half_period_error_percent"]["phase_1"], "%"),
+                (f"{at}L̂ᴵᴵ error", st["half_period_error_percent"]["phase_2"], "%"),
+                (f"{at}L̄/L", st["inductance_ratio"], ""),
+                (f"{at}position bias", st["position_bias_um"], "µm"),
+                (f"{at}σ̂(i) (eq. 28)", st["sigma_current_ma"], "mA"),
+                (f"{at}σ̂(L̂ᴵ) (eq. 30)", st["predicted_sigma_half_period_uh"]["phase_1"], "µH"),
+                (f"{at}σ̂(L̂ᴵᴵ) (eq. 30)", st["predicted_sigma_half_period_uh"]["phase_2"], "µH"),
+                (f"{at}straight-ramp σ(L̂ᴵ)", ramp[0] * 1e6, "µH"),
+                (f"{at}straight-ramp σ(L̂ᴵᴵ)", ramp[1] * 1e6, "µH"),
+                (f"{at}σ̂(L̄) (eq. 31)", st["predicted_sigma_inductance_uh"], "µH"),
+                (f"{at}σ̂(ŝ) (eq. 32)", st["predicted_sigma_position_um"], "µm"),
             ]
             poles[coil_pole_set(gap_m)] = np.array([-s.rig.coil_resistance_ohm / inductance], dtype=complex)
         notes = [("Readouts from 300 PWM periods held at each gap with the current settings; the histogram "
@@ -410,6 +412,14 @@ class SelfSensing(Exercise):
         carried = SelfSensingSimulation(values, old.retuned(new))
         carried.ripple = simulation.ripple
         return carried
+
+    def report_figures(self, values: dict) -> list:
+        """The estimated inductance and gap through one 4 → 6 → 4 mm cycle (§3.1-3.2), and the two
+        PWM periods' ripple with the fitted lines behind L̂ᴵ and L̂ᴵᴵ (eq. 11-18)."""
+        from lab_modules.exercises._figures import analysis_plots, plot_figure, scope_figure
+        return [scope_figure(self, [("", values)], self.default_duration_s, "One cycle 4 → 6 → 4 mm: "
+                             "inductance and gap, estimated against true", charts=("Inductance", "Gap")),
+                *(plot_figure(plot) for plot in analysis_plots(self, values, ("Ripple of two PWM periods",)))]
 
     def live_readouts(self, trace: dict[str, np.ndarray]) -> list[tuple[str, float, str]]:
         return live_readouts(trace, LAST_PERIODS)

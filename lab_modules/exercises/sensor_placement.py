@@ -341,6 +341,8 @@ class SensorPlacement(Exercise):
     default_duration_s = 0.3
     claims = CLAIMS
     locus = ("gain_factor", "closed loop")
+    key_readouts = ("Largest stable gain factor here", "Mode that goes unstable first",
+                    "RMS rotor motion at the bearing", "RMS sensor reading")
     charts = (
         Chart("Rotor position", "µm", (
             Series("reference", "reference_m", 1e6, "#7f7f7f"),

@@ -482,6 +482,8 @@ class StiffnessMap(Exercise):
     parameters = PARAMETERS
     default_duration_s = ADALINE_DURATION_S
     claims = CLAIMS
+    key_readouts = ("Table 4 entries matched (of 25)", "Table 5 entries matched (of 25)",
+                    "ADALINE: time to 1 % from the start", "ADALINE: time to 1 % after the step")
     charts = (
         Chart("ADALINE k̂_Magnet (eq. 24)", "N·mm²/A²", (
             Series("estimate", "k_magnet_estimate", 1.0, "#d62728"),
@@ -593,6 +595,13 @@ class StiffnessMap(Exercise):
 
     def retune(self, simulation: StiffnessMapSimulation, values: dict) -> StiffnessMapSimulation:
         return simulation.retuned(values)
+
+    def report_figures(self, values: dict) -> list:
+        """Tables 4 and 5 against the lab's least squares, the FBFNN's training (Fig. 10) and the
+        ADALINE's k̂_Magnet (Fig. 12)."""
+        from lab_modules.exercises._figures import analysis_plots, plot_figure
+        return [plot_figure(plot) for plot in analysis_plots(self, values, (
+            "k_i at the 25 nodes", "k_s at the 25 nodes", "FBFNN training", "ADALINE: k̂_Magnet"))]
 
     def metrics(self, values: dict, duration_s: float) -> dict:
         ki, ks_mm = identified_tables(values)

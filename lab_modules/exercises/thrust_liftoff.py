@@ -212,6 +212,9 @@ class ThrustLiftoff(Exercise):
     parameters = PARAMETERS
     default_duration_s = 2.0
     min_duration_s = 0.3             # the lift-off settles within about 0.21 s (its settling-time metric)
+    key_readouts = ("Net stiffness of the loop", "Accuracy gain std z / std x̂",
+                    "Steady std of true x, raw PID", "Steady std of true x, filter-PID",
+                    "Time at the current limit")
     charts = (
         Chart("Lift-off: collar position", "µm", (
             Series("measured z", "x_measured_m", 1e6, "#b0b0b0"),
@@ -344,15 +347,15 @@ class ThrustLiftoff(Exercise):
              / max(std["estimated"]["x_estimated_m"], 1e-300), "×"),
             ("Steady std of true x, raw PID", std["measured"]["x_true_m"] * 1e6, "µm"),
             ("Steady std of true x, filter-PID", std["estimated"]["x_true_m"] * 1e6, "µm"),
-            ("Current-command noise, raw PID", std["measured"]["current_command_a"], "A"),
-            ("Current-command noise, filter-PID", std["estimated"]["current_command_a"], "A"),
-            ("D-term noise alone, raw PID", d_noise, "A"),
-            ("Kalman gain K∞ (x ← z)", gain[0], ""),
-            ("Kalman gain K∞ (v ← z)", gain[1], "1/s"),
-            ("Filter σ of x at steady state", np.sqrt(max(P_corr[0, 0], 0.0)) * 1e6, "µm"),
-            ("Filter error pole radius in z", radius, ""),
-            ("Filter error pole damping", damping, ""),
-            ("Largest error of the Taylor Φ against the exact one", float(np.max(np.abs(Phi - Phi_e))), ""),
+            ("Current noise: command, raw PID", std["measured"]["current_command_a"], "A"),
+            ("Current noise: command, filter-PID", std["estimated"]["current_command_a"], "A"),
+            ("Current noise: D term alone, raw PID", d_noise, "A"),
+            ("Filter: Kalman gain K∞ (x ← z)", gain[0], ""),
+            ("Filter: Kalman gain K∞ (v ← z)", gain[1], "1/s"),
+            ("Filter: σ of x at steady state", np.sqrt(max(P_corr[0, 0], 0.0)) * 1e6, "µm"),
+            ("Filter: error pole radius in z", radius, ""),
+            ("Filter: error pole damping", damping, ""),
+            ("Filter: largest error of the Taylor Φ against the exact one", float(np.max(np.abs(Phi - Phi_e))), ""),
         ]
         runs = liftoff_runs(values)
         figures = {src: liftoff_figures(runs[src][0], s.start_position_m) for src in SOURCES}
@@ -406,7 +409,7 @@ class ThrustLiftoff(Exercise):
         gains, covariances = design.gain_history(n)
         t = np.arange(n) * T * 1e3
         return Plot("Kalman gain and σ from P0 over the first milliseconds", "time [ms]",
-                    "K_x [1], K_v·1 ms [1], σ_x/5 µm [1]", t,
+                    "gain or σ, scaled [1]", t,          # the legend says how each is scaled
                     (("K_x (x ← z)", gains[:, 0], "#d62728"),
                      ("K_v × 1 ms", gains[:, 1] * 1e-3, "#9467bd"),
                      ("σ_x / 5 µm", np.sqrt(np.maximum(covariances[:, 0, 0], 0.0)) / 5e-6, "#1f77b4")))
@@ -474,6 +477,16 @@ class ThrustLiftoff(Exercise):
     def scene(self, values: dict) -> ThrustBearingScene:
         """The collar between its stator halves, gaps and motion drawn ×40."""
         return ThrustBearingScene(values)
+
+    def report_figures(self, values: dict) -> list:
+        """Fig. 8 (the noise-free lift-offs of both controllers), Fig. 11's accuracy in a noisy run
+        (the estimate error inside ±3σ) and the current-command noise over the sensor noise."""
+        from lab_modules.exercises._figures import analysis_plots, plot_figure, scope_figure
+        plots = analysis_plots(self, values, ("Noise-free lift-off", "Current-command noise"))
+        return [plot_figure(plots[0]),
+                scope_figure(self, [("", values)], self.default_duration_s, "Lift-off with sensor noise "
+                             "(the chosen feedback)", charts=("Lift-off: collar position", "Estimation error x̂ − x, ±3σ")),
+                plot_figure(plots[1])]
 
     def live_readouts(self, trace: dict[str, np.ndarray]) -> list[tuple[str, float, str]]:
         error, sigma = trace["estimation_error_m"], trace["x_sigma_m"]
