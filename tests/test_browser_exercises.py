@@ -318,7 +318,8 @@ def test_worksheet_beside_the_charts(open_tab):
     page.get_by_text("Worksheet beside the charts").first.click()
     page.wait_for_function("() => [...document.querySelectorAll('h3, h2, h4')].some("
                            "e => e.innerText === 'Learning goals' && e.offsetParent !== null)", timeout=10000)
-    assert page.locator(".uplot").first.is_visible(), "the scope must stay in view"
+    scope = page.locator(".uplot").filter(has=page.locator(".u-title", has_text="Rotor position"))
+    assert scope.first.is_visible(), "the scope must stay in view"
     deadline = time.time() + 5
     while "Worksheet" in page.evaluate(DOCK_TABS_JS) and time.time() < deadline:
         time.sleep(0.2)
