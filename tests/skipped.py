@@ -5,10 +5,11 @@ showed 31 skips as nothing but ``s`` marks)."""
 from __future__ import annotations
 
 #: (a word of the skip reason, what the tests are, the Debian package that brings the program);
-#: a new system requirement (e.g. PostgreSQL once a test needs it) is one more line here.
+#: a new system requirement is one more line here.
 NEEDS = (
     ("chromium", "browser tests", "chromium"),
     ("haproxy", "lecture-hall tests", "haproxy"),
+    ("postgresql", "PostgreSQL store tests", "postgresql"),
 )
 
 

@@ -18,6 +18,8 @@ def test_the_line_names_what_was_skipped_and_the_command_that_installs_it():
                                      "to run them too: sudo apt-get install chromium haproxy")
     assert summary_line(["Skipped: HAProxy is not installed"]).endswith("sudo apt-get install haproxy")
     assert summary_line(["Skipped: needs 4 cores"]) == ""
+    assert summary_line(["Skipped: PostgreSQL is not installed (no initdb/pg_ctl on PATH)"] * 2) == (
+        "Skipped 2 PostgreSQL store tests (no postgresql); to run them too: sudo apt-get install postgresql")
 
 
 def test_a_run_with_skips_ends_with_that_line(tmp_path):
