@@ -78,8 +78,11 @@ def test_a_student_submits_from_the_link_and_the_instructor_exports(browser, ass
     tpage.get_by_role("button", name="Open the instructor page").click()
     tpage.get_by_role("cell", name="s5001", exact=True).wait_for(timeout=60000)
     _shot(tpage, "instructor")
+    _shot(tpage, "before_export")
+    tpage.wait_for_timeout(100)
     with tpage.expect_download() as download:
         tpage.get_by_role("button", name="Canvas").click()
+    _shot(tpage, "after_export")
     rows = list(csv.reader(io.StringIO(Path(download.value.path()).read_text(encoding="utf-8"))))
     assert rows[0][-1] == f"Filter the sensor noise ({code})" and ["s5001", "", "s5001", "", "", "4"] in rows
     tpage.get_by_role("button", name="Open as a lab tab").click()

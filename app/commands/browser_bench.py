@@ -116,12 +116,12 @@ def wait_for_new_sample(page, count: int, timeout_s: float = 10.0) -> None:
 
 
 def slider_latencies_ms(page, pause_s: float = 1.2) -> list[float]:
-    """Click the first slider (the position-noise one) at ``SLIDER_POSITIONS``; ms to the shown readouts.
+    """Click the first visible slider (the position-noise one) at ``SLIDER_POSITIONS``; ms to the shown readouts.
 
     The pause between moves outlasts the 3D view's hold after an input
     (``SCENE_QUIET_AFTER_INPUT_S``), so moves also land while it renders."""
     install_probe(page)
-    track = page.locator(".mantine-Slider-track").first.bounding_box()
+    track = page.locator(".mantine-Slider-track:visible").first.bounding_box()   # closed folders hide theirs
     for fraction in SLIDER_POSITIONS:
         count = len(probed_latencies_ms(page))
         page.mouse.click(track["x"] + fraction * track["width"], track["y"] + track["height"] / 2)

@@ -59,6 +59,10 @@ class Controls:
     def add_error_line(self, gui) -> None:
         self.error = gui.add_markdown("")
 
+    def forget_error_line(self) -> None:
+        """The GUI the line was in is gone (the tab left its lab for another page)."""
+        self.error = None
+
     def _add_input(self, gui, parameter: Parameter, values: dict, span: tuple[float, float] | None):
         value = values[parameter.name]
         label = f"{parameter.label} [{parameter.unit}]" if parameter.unit else parameter.label

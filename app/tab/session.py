@@ -156,7 +156,10 @@ class LabSession:
             raise
         except Exception as error:  # noqa: BLE001 - any failure of one event is shown, the tab goes on
             traceback.print_exc()
-            self._show_error(f"⚠️ That did not work: {escaped(error) or type(error).__name__}")
+            try:
+                self._show_error(f"⚠️ That did not work: {escaped(error) or type(error).__name__}")
+            except RuntimeError:                  # the line's GUI is gone: the log has it, the tab goes on
+                traceback.print_exc()
 
     def _enter(self, exercise: Exercise) -> None:
         """The class token was right: the lab replaces the gate."""
@@ -251,6 +254,8 @@ class LabSession:
             self.state.running = False
             self.client.gui.reset()
             self.client.scene.reset()
+            self.scene = None                     # nothing left to fit to the window
+            self.controls.forget_error_line()
 
     def _choose(self, title: str) -> None:
         chosen = next((e for e in self.exercises.values() if e.title == title), None)
