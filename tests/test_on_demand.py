@@ -28,7 +28,8 @@ from tests.example_exercise import contract_exercises
 from tests.wsclient import RawTab, lab_process, run_async
 
 EXERCISES = contract_exercises()
-SPLIT = ("kalman_noise", "stiffness_map", "adaptive_filter", "thrust_liftoff", "lqg_vs_pid", "rotor_at_speed")
+SPLIT = ("kalman_noise", "stiffness_map", "adaptive_filter", "thrust_liftoff", "lqg_vs_pid", "rotor_at_speed",
+         "ekf_disturbance")
 
 
 def _last(result) -> Analysis:
