@@ -6,6 +6,7 @@ beacon)."""
 from __future__ import annotations
 
 import asyncio
+import importlib
 
 import numpy as np
 import pytest
@@ -28,7 +29,8 @@ from tests.example_exercise import contract_exercises
 from tests.wsclient import RawTab, lab_process, run_async
 
 EXERCISES = contract_exercises()
-SPLIT = ("kalman_noise", "stiffness_map", "adaptive_filter", "thrust_liftoff", "lqg_vs_pid", "rotor_at_speed")
+SPLIT = ("kalman_noise", "stiffness_map", "adaptive_filter", "thrust_liftoff", "lqg_vs_pid", "rotor_at_speed",
+         "ekf_disturbance", "self_sensing")
 
 
 def _last(result) -> Analysis:
@@ -247,3 +249,47 @@ async def _panels_on_demand() -> None:
 def test_a_panel_is_computed_only_while_it_is_shown(tmp_path):
     with lab_process(PORT, "--exercise", "kalman_noise", data_dir=tmp_path, log=tmp_path / "server.log"):
         run_async(_panels_on_demand())
+
+
+# -- remembered pieces give the figures of a fresh computation --------------------------------------
+def _forget(module) -> None:
+    """Empty every memo of a module's ``remembered`` functions."""
+    for function in vars(module).values():
+        memo = getattr(function, "memo", None)
+        if isinstance(memo, Memo):
+            memo.entries.clear()
+            memo.read_sets.clear()
+
+
+@pytest.mark.parametrize("name, changes, neighbour", [
+    ("ekf_disturbance", {}, {"disturbance_step_n": 440.0}),
+    ("ekf_disturbance", {"disturbance_step_n": 250.0, "filter_q_force": 3.0, "sweep_amplitude_um": 80.0},
+     {"disturbance_step_n": 300.0}),
+    ("ekf_disturbance", {"experiment": "gap_sweep", "feedforward": "on", "sweep_load_n": -150.0, "seed": 3},
+     {"sweep_load_n": 100.0}),
+    ("self_sensing", {}, {"gap_2_mm": 6.5}),
+    ("self_sensing", {"gap_1_mm": 3.5, "battery_voltage_v": 12.0, "sigma_current_ma": 2.0}, {"gap_1_mm": 3.6}),
+    ("self_sensing", {"trajectory": "fixed at gap 2", "resistance_ratio": 1.05, "gap_2_mm": 7.0,
+                      "feedback": "self-sensing estimate ŝ"}, {"gap_2_mm": 6.0}),
+])
+def test_split_panels_with_remembered_pieces_show_what_a_fresh_analysis_shows(name, changes, neighbour):
+    """After a move from a neighbouring setting (its pieces remembered, some of them reused), every
+    panel's readouts, poles, notes and plots are those of the analysis computed afresh."""
+    exercise = get(name)
+    module = importlib.import_module(type(exercise).__module__)
+    values = exercise.resolve(changes)
+    _last(exercise.analyse(exercise.resolve({**changes, **neighbour})))
+    reused = _last(exercise.analyse(dict(values)))
+    _forget(module)
+    fresh = _last(exercise.analyse(dict(values)))
+    assert [label for label, _, _ in reused.readouts] == [label for label, _, _ in fresh.readouts]
+    np.testing.assert_array_equal([value for _, value, _ in reused.readouts],
+                                  [value for _, value, _ in fresh.readouts])
+    assert reused.notes == fresh.notes and reused.poles.keys() == fresh.poles.keys()
+    for key in fresh.poles:
+        np.testing.assert_array_equal(reused.poles[key], fresh.poles[key])
+    assert [plot.title for plot in reused.plots] == [plot.title for plot in fresh.plots]
+    for before, after in zip(reused.plots, fresh.plots):
+        np.testing.assert_array_equal(before.x, after.x)
+        for (_, y_before, _), (_, y_after, _) in zip(before.series, after.series):
+            np.testing.assert_array_equal(y_before, y_after)

@@ -24,7 +24,7 @@ import statistics
 import time
 
 from app.panels import plots, pole_map
-from app.panels.text import readouts_table
+from app.panels.readouts import grouped_markdown
 from lab_modules.evaluation import poles
 from lab_modules.evaluation.panel_analyses import margin_results, panel_results
 from lab_modules.exercises import ANALYSIS, POLE_MAP, SCOPE, Analysis, Exercise, get, registry, results
@@ -60,7 +60,7 @@ def scope_job(exercise: Exercise, values: dict) -> Analysis:
     """The Scope's results and its readouts table; the last result."""
     last = None
     for last in panel_results(exercise, values, SCOPE):
-        readouts_table(last.readouts, last.notes)
+        grouped_markdown(last.readouts, last.notes)
     return last
 
 
@@ -77,7 +77,7 @@ def analysis_job(exercise: Exercise, values: dict, scope: Analysis) -> None:
     found = panel_results(exercise, values, ANALYSIS) or (Analysis([], {}, [], scope.plots),)
     readouts, margin_plots, notes = margin_results(exercise, values)
     for result in found:
-        readouts_table(result.readouts + readouts, result.notes + notes)
+        grouped_markdown(result.readouts + readouts, result.notes + notes)
         for plot in result.plots + margin_plots:
             plots.plot_chart(plot)
 

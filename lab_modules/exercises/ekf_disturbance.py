@@ -47,7 +47,7 @@ import numpy as np
 from lab_modules import analysis
 from lab_modules.claims import Claim
 from lab_modules.estimators import extended_kalman as ef
-from lab_modules.exercises import Analysis, Chart, Exercise, Plot, PoleCategory, Series
+from lab_modules.exercises import POLE_MAP, SCOPE, Analysis, Chart, Exercise, Plot, PoleCategory, Series
 from lab_modules.exercises._common import (
     AXIS_ERROR_STATES,
     axis_mode_matrices,
@@ -73,6 +73,7 @@ from lab_modules.loops.radial_axis_ekf_loop import (
     loop_at_plant_input,
     no_input,
 )
+from lab_modules.memo import remembered
 from lab_modules.parameters import Parameter, in_si
 from lab_modules.plants.radial_bearing import DEFAULT_SENSOR_LAG_S, RIG
 from lab_modules.scenes.bearing import ESTIMATE_RED, MEASURED_GREY, BearingScene, Ghost
@@ -128,15 +129,14 @@ def setup(values: dict, experiment: str | None = None, step_n: float | None = No
     """The experiment described by the parameter values.  ``experiment``
     overrides the choice; "step" is the metrics' one-shot step of ``step_n``."""
     experiment = experiment or values["experiment"]
-    step_n = values["disturbance_step_n"] if step_n is None else step_n
     si = in_si(PARAMETERS, values)
     if experiment == "gap_sweep":
         reference = Sine(si["sweep_amplitude_um"], si["sweep_period_ms"], SWEEP_START_S)
         disturbance = Ramp(values["sweep_load_n"], LOAD_RAMP_S)
     elif experiment == "step":
-        reference, disturbance = no_input, Step(step_n, STEP_TIME_S)
+        reference, disturbance = no_input, Step(values["disturbance_step_n"] if step_n is None else step_n, STEP_TIME_S)
     else:
-        reference, disturbance = no_input, SquareWave(step_n, si["step_period_ms"])
+        reference, disturbance = no_input, SquareWave(values["disturbance_step_n"], si["step_period_ms"])
     return EKFLoopSetup(
         model=ef.NONLINEAR,
         filter_x0=np.zeros(ef.N_STATES),
@@ -155,11 +155,18 @@ def _run(axis: EKFLoopSetup, seed: int, duration_s: float) -> tuple[np.ndarray, 
     return sim.advance(round(duration_s / T)), sim.status_message()
 
 
+@remembered(size=16)
+def step_run(values: dict, step_n: float, duration_s: float) -> tuple[np.ndarray, str]:
+    """The one-shot experiment with a step of ``step_n`` [N] (remembered: the run without the step
+    does not depend on the step's height, and a move of the step leaves it as it was)."""
+    return _run(setup(values, "step", step_n), int(values["seed"]), duration_s)
+
+
 def force_step(values: dict, duration_s: float = 0.25) -> dict:
     """Fig. 4: the force estimate's response to a one-shot step (see module docstring)."""
-    step_n, seed = values["disturbance_step_n"], int(values["seed"])
-    with_step, status = _run(setup(values, "step"), seed, duration_s)
-    without, _ = _run(setup(values, "step", 0.0), seed, duration_s)
+    step_n = values["disturbance_step_n"]
+    with_step, status = step_run(values, step_n, duration_s)
+    without, _ = step_run(values, 0.0, duration_s)
     n = min(len(with_step), len(without))
     t = with_step[:n, 0]
     response = column(with_step, "force_estimated_n")[:n] - column(without, "force_estimated_n")[:n]
@@ -178,6 +185,7 @@ def force_step(values: dict, duration_s: float = 0.25) -> dict:
             "peak_displacement_um": float(1e6 * np.max(np.abs(x[after]))) if after.any() else float("nan")}
 
 
+@remembered(size=16)
 def gap_sweep(values: dict) -> dict:
     """Fig. 5: the factors of eq. 18 against the analytic derivatives of eq. 10
     over one sweep period (samples after the load ramp and the first 10 ms)."""
@@ -316,26 +324,31 @@ class EkfDisturbance(Exercise):
         feedforward = " + feedforward" if values["feedforward"] == "on" else ""
         return {f"PID, {values['feedback']} x{feedforward}": loop_at_plant_input(setup(values))}
 
-    def analyse(self, values: dict) -> Analysis:
-        step, sweep = force_step(values), gap_sweep(values)
-        readouts = [
-            ("Force estimate settling (±5 %)", step["settling_ms"], "ms"),
-            ("Force estimate noise σ", step["noise_n"], "N"),
-            ("Peak displacement after the step", step["peak_displacement_um"], "µm"),
-            ("k_x from Φ: max error over the sweep", sweep["kx_max_error_percent"], "%"),
-            ("k_i from Φ: max error over the sweep", sweep["ki_max_error_percent"], "%"),
-        ]
-        notes = [f"Force step: {step['status']}", f"Gap sweep: {sweep['status']}",
+    def analyse_panel(self, values: dict, panel: str) -> Analysis:
+        """The Scope: the force step's figures (two short runs); the Pole map: the linearised loop's,
+        the plant's and the filter's poles; the Analysis tab: the gap sweep's k_x, k_i errors and
+        Fig. 4-5."""
+        if panel == SCOPE:
+            step = force_step(values)
+            return Analysis([("Force estimate settling (±5 %)", step["settling_ms"], "ms"),
+                             ("Force estimate noise σ", step["noise_n"], "N"),
+                             ("Peak displacement after the step", step["peak_displacement_um"], "µm")],
+                            {}, [f"Force step: {step['status']}"])
+        if panel == POLE_MAP:
+            plant = RIG.continuous_model(in_si(PARAMETERS, values)["sensor_lag_us"])
+            return Analysis([], {"open-loop plant": np.linalg.eigvals(np.asarray(plant.A)),
+                                 CLOSED_LOOP: analysis.z_to_s(analysis.loop_poles(linear_axis(values).loop()), T),
+                                 "filter error (at x = 0)": filter_poles(values)})
+        sweep = gap_sweep(values)
+        readouts = [("k_x from Φ: max error over the sweep", sweep["kx_max_error_percent"], "%"),
+                    ("k_i from Φ: max error over the sweep", sweep["ki_max_error_percent"], "%")]
+        notes = [f"Gap sweep: {sweep['status']}",
                  ("Eq. 18 returns exactly the derivatives of eq. 10 at the filter's estimate (x_hat, i_hat); "
-                  "its error against the truth is the estimate's error, mostly that of i_hat.")]
-        plant = RIG.continuous_model(in_si(PARAMETERS, values)["sensor_lag_us"])
-        poles = {"open-loop plant": np.linalg.eigvals(np.asarray(plant.A)),
-                 CLOSED_LOOP: analysis.z_to_s(analysis.loop_poles(linear_axis(values).loop()), T),
-                 "filter error (at x = 0)": filter_poles(values)}
-        notes.append("Closed-loop poles (linearised at x = 0): the PID on the rig's linear model (eq. 3-4) with "
-                     "the plant's sensor lag, fed by a steady-state Kalman filter of x, v, i with the same q_22, "
-                     "q_33 and R; the force state f_z and its feedforward are left out.")
-        return Analysis(readouts, poles, notes, [fig_4_plot(values, step), *fig_5_plots(values, sweep)])
+                  "its error against the truth is the estimate's error, mostly that of i_hat."),
+                 ("Closed-loop poles (linearised at x = 0): the PID on the rig's linear model (eq. 3-4) with "
+                  "the plant's sensor lag, fed by a steady-state Kalman filter of x, v, i with the same q_22, "
+                  "q_33 and R; the force state f_z and its feedforward are left out.")]
+        return Analysis(readouts, {}, notes, [fig_4_plot(values, force_step(values)), *fig_5_plots(values, sweep)])
 
     def mode_matrices(self, values: dict) -> dict[str, tuple]:
         """The linearised loop (paper 000 eq. 1-4, 12-13; PID §IV) and the EKF's error at the centre

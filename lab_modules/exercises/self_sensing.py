@@ -40,10 +40,11 @@ from lab_modules.loops.self_sensing_loop import (
     SelfSensingLoop,
     SelfSensingSetup,
 )
+from lab_modules.memo import remembered
 from lab_modules.parameters import Parameter, in_si
 from lab_modules.scenes.self_sensing import SelfSensingScene
 
-from . import Action, Analysis, Chart, Exercise, Plot, PoleCategory, Series
+from . import POLE_MAP, SCOPE, Action, Analysis, Chart, Exercise, Plot, PoleCategory, Series
 from . import _self_sensing_geometry as geometry
 from . import _self_sensing_levitation as levitation
 from ._self_sensing_statistics import (
@@ -63,6 +64,7 @@ NOISY_PERIODS = 5000         # stationary periods per gap with noise: coverage o
 QUIET_PERIODS = 300          # stationary periods per gap without noise
 LAST_PERIODS = 500           # the live "empirical std" window
 LIVE_RIPPLE_POINTS = 256     # samples per live ripple plot (every 8th of 2 × 1024): 1 kB per series and update
+HELD_PERIODS = 300           # the analysis's stationary run at each gap
 MONTE_CARLO_SEEDS = 4        # the Monte-Carlo button: seeds × periods held at one gap
 MONTE_CARLO_PERIODS = 1250
 GAPS = ("gap_1", "gap_2")
@@ -237,6 +239,49 @@ def stationary(values: dict, gap: str, periods: int | None = None, seed_offset: 
     return rows
 
 
+@remembered(size=16)
+def held_rows(values: dict, gap: str) -> np.ndarray:
+    """The analysis's ``HELD_PERIODS`` PWM periods held at one gap (remembered: the Scope and the Analysis tab
+    both read those at gap 1)."""
+    return stationary(values, gap, periods=HELD_PERIODS)
+
+
+def held_readouts(values: dict, s: SelfSensingSetup, gap: str) -> list[tuple[str, float, str]]:
+    """The readouts of ``held_rows`` at one gap: inductance and current (eq. 2), the estimator's
+    figures (eq. 18, 28-32) and the straight-ramp prediction of σ(L̂) over each window."""
+    gap_m = s.gap_1_m if gap == "gap_1" else s.gap_2_m
+    at = f"At {gap_m * 1e3:g} mm: "                  # the group a long list folds
+    inductance = float(s.rig.inductance_h(gap_m))
+    current = float(s.rig.equilibrium_current_a(gap_m))
+    st = statistics(held_rows(values, gap))
+    windows = [st["duty"] * s.samples_per_period - 2 * s.trim_samples + 1,
+               (1 - st["duty"]) * s.samples_per_period - 2 * s.trim_samples + 1]
+    v_bat = s.battery_voltage_v
+    ramp = [predicted_sigma_inductance_h(inductance, s.sigma_current_a, v, round(m), s.sample_time_s)
+            for v, m in zip((v_bat - s.rig.coil_resistance_ohm * current,
+                             v_bat + s.rig.coil_resistance_ohm * current), windows)]
+    return [
+        (f"{at}L (eq. 2)", inductance * 1e3, "mH"),
+        (f"{at}equilibrium current", current, "A"),
+        (f"{at}duty χ", st["duty"], ""),
+        (f"{at}Δiᴵ", st["delta_current_ma"][0], "mA"),
+        (f"{at}Δiᴵᴵ", st["delta_current_ma"][1], "mA"),
+        (f"{at}weight wᴵ (eq. 18)", st["weights"][0], ""),
+        (f"{at}weight wᴵᴵ (eq. 18)", st["weights"][1], ""),
+        (f"{at}L̂ᴵ error", st["half_period_error_percent"]["phase_1"], "%"),
+        (f"{at}L̂ᴵᴵ error", st["half_period_error_percent"]["phase_2"], "%"),
+        (f"{at}L̄/L", st["inductance_ratio"], ""),
+        (f"{at}position bias", st["position_bias_um"], "µm"),
+        (f"{at}σ̂(i) (eq. 28)", st["sigma_current_ma"], "mA"),
+        (f"{at}σ̂(L̂ᴵ) (eq. 30)", st["predicted_sigma_half_period_uh"]["phase_1"], "µH"),
+        (f"{at}σ̂(L̂ᴵᴵ) (eq. 30)", st["predicted_sigma_half_period_uh"]["phase_2"], "µH"),
+        (f"{at}straight-ramp σ(L̂ᴵ)", ramp[0] * 1e6, "µH"),
+        (f"{at}straight-ramp σ(L̂ᴵᴵ)", ramp[1] * 1e6, "µH"),
+        (f"{at}σ̂(L̄) (eq. 31)", st["predicted_sigma_inductance_uh"], "µH"),
+        (f"{at}σ̂(ŝ) (eq. 32)", st["predicted_sigma_position_um"], "µm"),
+    ]
+
+
 class SelfSensing(Exercise):
     name = "self_sensing"
     title = "Self-sensing: the gap from the PWM current ripple"
@@ -298,60 +343,33 @@ class SelfSensing(Exercise):
         s = setup(values)
         return {coil_pole_set(gap_m): PoleCategory.PLANT for gap_m in (s.gap_1_m, s.gap_2_m)}
 
-    def analyse(self, values: dict):
+    def analyse_panel(self, values: dict, panel: str) -> Analysis:
+        """The Scope: the figures held at gap 1 (one stationary run); the Pole map: each gap's coil
+        pole; the Analysis tab: the figures at gap 2, the geometry's trade-off, the levitated loop's
+        figures and the plots."""
         s = setup(values)
-        v_bat = s.battery_voltage_v
-        readouts, poles, runs = [], {}, {}
-        for gap in GAPS:
-            gap_m = s.gap_1_m if gap == "gap_1" else s.gap_2_m
-            at = f"At {gap_m * 1e3:g} mm: "                  # the group a long list folds
-            inductance = float(s.rig.inductance_h(gap_m))
-            current = float(s.rig.equilibrium_current_a(gap_m))
-            rows = stationary(values, gap, periods=300)
-            runs[gap] = rows
-            st = statistics(rows)
-            windows = [st["duty"] * s.samples_per_period - 2 * s.trim_samples + 1,
-                       (1 - st["duty"]) * s.samples_per_period - 2 * s.trim_samples + 1]
-            ramp = [predicted_sigma_inductance_h(inductance, s.sigma_current_a, v, round(m), s.sample_time_s)
-                    for v, m in zip((v_bat - s.rig.coil_resistance_ohm * current,
-                                     v_bat + s.rig.coil_resistance_ohm * current), windows)]
-            readouts += [
-                (f"{at}L (eq. 2)", inductance * 1e3, "mH"),
-                (f"{at}equilibrium current", current, "A"),
-                (f"{at}duty χ", st["duty"], ""),
-                (f"{at}Δiᴵ", st["delta_current_ma"][0], "mA"),
-                (f"{at}Δiᴵᴵ", st["delta_current_ma"][1], "mA"),
-                (f"{at}weight wᴵ (eq. 18)", st["weights"][0], ""),
-                (f"{at}weight wᴵᴵ (eq. 18)", st["weights"][1], ""),
-                (f"{at}L̂ᴵ error", st["half_period_error_percent"]["phase_1"], "%"),
-                (f"{at}L̂ᴵᴵ error", st["half_period_error_percent"]["phase_2"], "%"),
-                (f"{at}L̄/L", st["inductance_ratio"], ""),
-                (f"{at}position bias", st["position_bias_um"], "µm"),
-                (f"{at}σ̂(i) (eq. 28)", st["sigma_current_ma"], "mA"),
-                (f"{at}σ̂(L̂ᴵ) (eq. 30)", st["predicted_sigma_half_period_uh"]["phase_1"], "µH"),
-                (f"{at}σ̂(L̂ᴵᴵ) (eq. 30)", st["predicted_sigma_half_period_uh"]["phase_2"], "µH"),
-                (f"{at}straight-ramp σ(L̂ᴵ)", ramp[0] * 1e6, "µH"),
-                (f"{at}straight-ramp σ(L̂ᴵᴵ)", ramp[1] * 1e6, "µH"),
-                (f"{at}σ̂(L̄) (eq. 31)", st["predicted_sigma_inductance_uh"], "µH"),
-                (f"{at}σ̂(ŝ) (eq. 32)", st["predicted_sigma_position_um"], "µm"),
-            ]
-            poles[coil_pole_set(gap_m)] = np.array([-s.rig.coil_resistance_ohm / inductance], dtype=complex)
-        notes = [("Readouts from 300 PWM periods held at each gap with the current settings; the histogram "
-                 "is from those at gap 1. *Run Monte-Carlo* (controls, left) checks σ̂(L̄) over "
-                 f"{MONTE_CARLO_SEEDS} seeds × {MONTE_CARLO_PERIODS} periods.")]
-        quick = runs["gap_1"]
-        extra, more_notes, plots = geometry.analysis(s)
+        if panel == SCOPE:
+            notes = [(f"Readouts from {HELD_PERIODS} PWM periods held at each gap with the current settings; the histogram "
+                      "is from those at gap 1. *Run Monte-Carlo* (controls, left) checks σ̂(L̄) over "
+                      f"{MONTE_CARLO_SEEDS} seeds × {MONTE_CARLO_PERIODS} periods.")]
+            return Analysis(held_readouts(values, s, "gap_1"), {}, notes)
+        if panel == POLE_MAP:
+            return Analysis([], {coil_pole_set(gap_m): np.array(
+                [-s.rig.coil_resistance_ohm / float(s.rig.inductance_h(gap_m))], dtype=complex)
+                for gap_m in (s.gap_1_m, s.gap_2_m)})
+        readouts = held_readouts(values, s, "gap_2")
+        quick = held_rows(values, "gap_1")
+        extra, notes, plots = geometry.analysis(s)
         readouts += extra
-        notes += more_notes
         if levitation.levitated(values):
             extra, more_notes, more_plots = levitation.analysis(
-                s, values, statistics(runs["gap_1"])["predicted_sigma_position_um"] * 1e-6)
+                s, values, statistics(quick)["predicted_sigma_position_um"] * 1e-6)
             readouts += extra
             notes += more_notes
             plots = more_plots + plots
-        return Analysis(readouts, poles, notes, plots + self.ripple_plots(values) + [histogram(
+        return Analysis(readouts, {}, notes, plots + self.ripple_plots(values) + [histogram(
             (quick[:, COLUMN["inductance_mean_h"]] - quick[:, COLUMN["inductance_true_h"]])
-            / quick[:, COLUMN["sigma_inductance_mean_h"]], f"{s.gap_1_m * 1e3:g} mm (300 periods)")])
+            / quick[:, COLUMN["sigma_inductance_mean_h"]], f"{s.gap_1_m * 1e3:g} mm ({HELD_PERIODS} periods)")])
 
     def ripple_plots(self, values: dict) -> list[Plot]:
         """Two PWM periods at gap 1 after the duty has settled (the Analysis tab's snapshot of the
