@@ -17,6 +17,7 @@ import time
 import msgspec
 import pytest
 
+from lab_modules.exercises import get
 from tests.wsclient import (
     REPO,
     RawTab,
@@ -278,7 +279,9 @@ def test_saved_experiment_survives_sigkill(tmp_path):
             await tab.send({"type": "FileTransferPart", "source_component_uuid": upload, "transfer_uuid": "u",
                             "part_index": 0, "content": edited})
             assert await tab.wait_for(lambda: tab.find_containing("GuiMarkdownMessage", "Loaded short"), 30)
-            q = next(u for u, e in tab.elements.items() if e["type"] == "GuiSliderMessage")
+            controls = {p.label for p in get("maglev_tuning").parameters}     # not the filter debugger's sliders
+            q = next(u for u, e in tab.elements.items()
+                     if e["type"] == "GuiSliderMessage" and e["label"].split(" [")[0] in controls)
             label, moved = tab.elements[q]["label"], round(float(tab.elements[q]["value"]) + 0.5, 3)
             await tab.set_value(q, moved)
             await asyncio.sleep(1.0)
@@ -297,7 +300,7 @@ def test_saved_experiment_survives_sigkill(tmp_path):
             await tab.set_value(field, code.lower())
             await tab.set_value(tab.find("GuiButtonGroupMessage", "Experiment"), "Open")
             opened = await tab.wait_for(lambda: tab.find_containing("GuiMarkdownMessage", f"Opened **{code}**"), 60)
-            slider = tab.find("GuiSliderMessage", label)
+            slider = await tab.wait_for(lambda: tab.find("GuiSliderMessage", label), 30)
             await tab.close()
             return opened, tab.elements[slider]["value"], tab.find_containing("GuiMarkdownMessage", "### Maglev")
         opened, value, heading = run_async(second())
