@@ -31,6 +31,13 @@ def test_key_readouts_are_pinned_in_their_order_and_a_word_carries_no_unit():
     assert readouts.pinned_markdown(rows, ()) == ""
 
 
+def test_a_unit_stays_on_one_line_beside_a_long_label():
+    """ekf_parameters at 1024 and 1366 px: "N/µm" broke after its slash in the narrow unit column."""
+    row = readouts.row_markdown("True k_x at the operating point", 0.8, "N/µm")
+    unit = row.split("|")[3].strip()
+    assert unit == "N/" + readouts.WORD_JOINER + "µm" and unit.replace(readouts.WORD_JOINER, "") == "N/µm"
+
+
 def test_a_key_readout_not_computed_yet_shows_a_dash_and_says_when_it_comes():
     """A key readout of the Analysis tab is computed only while that tab is shown (issue 23): pinned
     above the scope it is a dash until then, with a note that says so."""

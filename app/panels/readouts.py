@@ -18,9 +18,19 @@ LIVE_GROUP = "This run (scope window)"
 ABSENT_NOTE = "measured once the run has begun, or (a sweep) while the Analysis tab is shown"
 
 
+#: Joins a unit's characters where the browser would break a line ("N/" above "µm" in a narrow unit
+#: column, the label beside it taking the width): U+2060 WORD JOINER, invisible.
+WORD_JOINER = "\u2060"
+
+
+def unit_cell(unit: str) -> str:
+    """A unit as one unbreakable table cell ("N/µm", "1/(m·s)²" stay on one line)."""
+    return cell(unit).replace("/", "/" + WORD_JOINER)
+
+
 def row_markdown(label: str, value, unit: str) -> str:
     """One table row; a word in place of a number ("touched down") carries no unit."""
-    return f"| {cell(label)} | {readout(value)} | {'' if isinstance(value, str) else cell(unit)} |"
+    return f"| {cell(label)} | {readout(value)} | {'' if isinstance(value, str) else unit_cell(unit)} |"
 
 
 def key_rows(rows, keys: tuple[str, ...], absent: str | None = None) -> list:
