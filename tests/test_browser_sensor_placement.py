@@ -20,7 +20,8 @@ FRAME_RATE_JS = """() => new Promise(done => {
 
 
 def _readouts(page) -> str:
-    return page.locator("table").filter(has_text="Largest stable gain factor here").first.inner_text()
+    return page.locator("table").filter(has_text="Largest stable gain factor here").filter(
+        has_text="residue sign").first.inner_text()              # the whole table, not the pinned key readouts
 
 
 def _wait_for(page, text: str, timeout_s: float = 15.0) -> str:

@@ -15,7 +15,7 @@ def test_legends_recording_note_and_still_segment_range(open_tab):
     tab = open_tab()
     page = tab.page
     page.get_by_role("heading", name=get("kalman_noise").title).wait_for(timeout=60000)
-    page.locator(".u-legend").first.wait_for(timeout=20000)
+    page.locator(".u-legend:visible").first.wait_for(timeout=20000)   # closed folders hold hidden charts
     legends = page.locator(".u-legend:visible").all_inner_texts()
     assert legends and not any("range" in text for text in legends), legends
 

@@ -232,7 +232,7 @@ def test_truncation_keeps_the_gain_limits():
 def test_analysis_views():
     """Readouts, the mode table, poles and the three plots, for a sensor on each side."""
     for offset, sign in ((60.0, -1.0), (0.0, 1.0)):
-        result = sp.EXERCISE.analyse(sp.EXERCISE.resolve({"sensor_offset_mm": offset}))
+        *_, result = sp.EXERCISE.analyse(sp.EXERCISE.resolve({"sensor_offset_mm": offset}))   # the fullest result
         readouts = {label: value for label, value, _ in result.readouts}
         assert readouts["Mode 3: residue sign φ(actuator)·φ(sensor)"] == sign
         assert len(result.plots) == 3 and result.plots[1].points
