@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import time
 
+from app.panels.readouts import WORD_JOINER
 from lab_modules.formatting import INFINITY, MINUS_INFINITY, NOT_A_NUMBER, SUPERSCRIPT
 
 #: the visible pole maps: title, x range, series labels and stroke colours, top-axis labels and
@@ -46,8 +47,10 @@ def pole_maps(page, count: int = 2, timeout_s: float = 15.0) -> list[dict]:
 
 
 def readout_rows(page) -> list[tuple[str, str, str]]:
-    """The readouts table as shown: (quantity, value, unit) texts."""
-    return [tuple(row) for row in page.evaluate(READOUTS_JS) if len(row) == 3]
+    """The readouts table as read: (quantity, value, unit) texts, without the invisible word
+    joiner that keeps a unit such as "N/µm" on one line."""
+    return [tuple(cell.replace(WORD_JOINER, "") for cell in row)
+            for row in page.evaluate(READOUTS_JS) if len(row) == 3]
 
 
 def shown_number(text: str) -> float | str:

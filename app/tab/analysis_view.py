@@ -231,7 +231,7 @@ class AnalysisView:
             elif panel == ANALYSIS:
                 self.panel_shown = (0, None)
                 self.panel_readouts.content = message
-            elif self.pole_status is not None:
+            elif self.mode_picker is None:
                 self.pole_status.content = message
             else:
                 self.pole_table.content = message
@@ -282,8 +282,9 @@ class AnalysisView:
         gui = self.client.gui
         if self.mode_picker is None:
             with self.client.atomic(), self.pole_tab:
-                self.pole_status.remove()
-                self.pole_status = None
+                # Hidden, not removed: a browser may apply the note's first update after a removal
+                # that follows it closely, and then reports an update of a missing element.
+                self.pole_status.visible = False
                 plots = tuple(gui.add_uplot(data, **options, aspect=1.6) for data, options in pole_map.charts(view))
                 self.mode_picker = mode_picker.ModePicker(gui, plots, view)
                 self.mode_picker.dropdown.on_update(self.on("show mode", self._pick_mode))
