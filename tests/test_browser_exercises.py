@@ -176,6 +176,20 @@ def test_scope_axes_survive_a_resize_in_the_same_render_as_data(open_tab):
     assert not tab.errors, tab.errors
 
 
+def _wait_for_steady_y_ranges(page, timeout_s: float = 60.0) -> None:
+    """Until the scopes' y ranges stay the same for 2 s: a loaded machine simulates slower than real
+    time, and the start-up transient then stays in the window longer than the 5 s it takes idle."""
+    deadline = time.time() + timeout_s
+    before = [s["y"] for s in page.evaluate(SCOPE_AXES_JS)]
+    while time.time() < deadline:
+        time.sleep(2.0)
+        now = [s["y"] for s in page.evaluate(SCOPE_AXES_JS)]
+        if now == before:
+            return
+        before = now
+    raise AssertionError(f"the scopes' y ranges kept changing for {timeout_s:.0f} s: {before}")
+
+
 def test_scope_axes_are_laid_out_from_the_first_frames(open_tab):
     """Issue 11, defect 13 (DEVELOPERS 11(e)): a panel tab's charts are made anew on every visit,
     at width 0, and uPlot lays their axes out only when a scale changes (a resize that lands in
@@ -195,7 +209,7 @@ def test_scope_axes_are_laid_out_from_the_first_frames(open_tab):
             time.sleep(1.0)                           # ... and have their axes within a second
             first = page.evaluate(SCOPE_AXES_JS)
             assert first and all(min(s["ticks"]) >= 3 for s in first), (exercise, "switch", first)
-        time.sleep(5.0)                               # the start-up transient has left the y range
+        _wait_for_steady_y_ranges(page)               # the start-up transient has left the y range
         for name in ("Pole map", "Analysis", "Worksheet"):
             tab.open_panel_tab(name)
             time.sleep(0.8)
