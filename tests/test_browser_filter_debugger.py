@@ -1,5 +1,6 @@
 """The filter debugger in a real browser: paused, it steps back 10 samples and the typeset
-equations' sample, the ellipse chart and the consistency readouts follow."""
+equations' sample, the ellipse chart and the consistency readouts follow; the 3D view shows the
+ellipsoids of three states in place of the rig, and the rig again when the simulation runs."""
 
 from __future__ import annotations
 
@@ -36,4 +37,25 @@ def test_debugger_steps_back_ten_samples(open_tab):
     assert page.get_by_text("NEES (3 dof)").first.is_visible()
     if os.environ.get("LAB_SCREENSHOTS"):
         page.screenshot(path=os.path.join(os.environ["LAB_SCREENSHOTS"], "filter_debugger.png"), full_page=True)
+
+    canvas = page.locator("canvas").first
+    rig = _settled(canvas)
+    page.get_by_label("3D view shows", exact=True).click()
+    page.get_by_role("option", name="x / v / i", exact=True).click()
+    ellipsoids = _settled(canvas)
+    assert ellipsoids != rig
+    page.get_by_role("button", name="1 ▶").click()                     # the next sample's update shrinks P
+    page.get_by_text(re.compile(rf"^Sample {newest - 9}, t = ")).wait_for(timeout=10000)
+    assert _settled(canvas) != ellipsoids
+    if os.environ.get("LAB_SCREENSHOTS"):
+        page.screenshot(path=os.path.join(os.environ["LAB_SCREENSHOTS"], "filter_debugger_3d.png"))
+    page.get_by_role("button", name="Run").click()
+    page.get_by_text("Pause the simulation to step back").wait_for(timeout=10000)
+    assert _settled(canvas) != ellipsoids                               # the rig is back
     assert not tab.errors, tab.errors
+
+
+def _settled(canvas) -> bytes:
+    """The 3D view once it has drawn what it was sent."""
+    time.sleep(1.5)
+    return canvas.screenshot()

@@ -9,13 +9,15 @@ is computed while the simulation runs."""
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
 import viser
 
 from app.panels import filter_branch, scope
-from app.panels.inspector import prefixed
+from app.panels.covariance_view import CovarianceView
+from app.panels.inspector import prefixed, symbol
 from app.panels.typeset import typeset
 from lab_modules.estimators.filter_consistency import consistency
 from lab_modules.estimators.filter_history import FilterHistory, branch
@@ -24,6 +26,7 @@ from lab_modules.formatting import number
 RUNNING_NOTE = "*Pause the simulation to step back through the filter's last samples.*"
 SIGMAS = (1, 2, 3)
 PRIOR_COLOUR, POSTERIOR_COLOUR, TRUTH_COLOUR, MEASUREMENT_COLOUR = "#1f77b4", "#d62728", "#2ca02c", "#7f7f7f"
+THE_RIG = "the rig"
 GRID = 121                        # x points per ellipse half
 DIGITS = 4
 
@@ -174,10 +177,11 @@ def consistency_text(history: FilterHistory, row: int, window: int) -> str:
 class FilterDebugger:
     """The "Filter debugger" folder: scrubber, step buttons, equations, ellipses, consistency, branch."""
 
-    def __init__(self, gui, states: tuple[tuple[str, str], ...], on, keep=None):
+    def __init__(self, gui, states: tuple[tuple[str, str], ...], on, keep=None, scene=None, rig=None):
         """``on(name, function)`` makes a GUI callback of ``function`` (the tab's worker runs it);
         ``keep(q_scale, r_scale, model)`` makes a branch's Q and R the running setting and says what
-        it did (None: branches cannot be kept)."""
+        it did (None: branches cannot be kept); ``scene`` (the tab's viser SceneApi) shows the
+        ellipsoids of three states in place of the exercise's ``rig`` (its attached ``SceneView``)."""
         self.history: FilterHistory | None = None
         self.rerun: FilterHistory | None = None   # the branch on show, if any
         self.keep = keep
@@ -190,6 +194,12 @@ class FilterDebugger:
             pairs = [f"{a[0]} / {b[0]}" for n, a in enumerate(states) for b in states[n + 1:]]
             self.pairs = [(n, m) for n in range(len(states)) for m in range(n + 1, len(states))]
             self.pair = gui.add_dropdown("Ellipse states", tuple(pairs), initial_value=pairs[0])
+            self.triples = list(itertools.combinations(range(len(states)), 3))
+            self.covariance = None if scene is None or not self.triples else CovarianceView(scene, rig, states)
+            self.view_3d = None if self.covariance is None else gui.add_dropdown(
+                "3D view shows", (THE_RIG, *(" / ".join(symbol(states[k][0]) for k in t) for t in self.triples)),
+                initial_value=THE_RIG, hint="While paused: the 3σ ellipsoids of P⁻ and P⁺ for three states around "
+                                            "the true state, in place of the rig.")
             self.window = gui.add_slider("NEES/NIS window", min=50, max=4000, step=50, initial_value=1000,
                                          hint="Samples up to the shown one that the consistency tests average.")
             self.chart = gui.add_uplot(scope.placeholder(0.0, 1.0, len(ellipse_series()) - 1), ellipse_series(),
@@ -210,21 +220,24 @@ class FilterDebugger:
             self.text = gui.add_markdown("")
         moves = {"◀ 10": -10, "◀ 1": -1, "1 ▶": 1, "10 ▶": 10}
         self.steps.on_click(on("debugger step", lambda: self.step(moves[self.steps.value])))
-        for handle in (self.scrubber, self.pair, self.window):
-            handle.on_update(on("debugger view", self.draw))
+        for handle in (self.scrubber, self.pair, self.window, self.view_3d):
+            if handle is not None:
+                handle.on_update(on("debugger view", self.draw))
         self.branch_button.on_click(on("debugger branch", self.show_branch))
         self.keep_drop.on_click(on("debugger keep", lambda: self.keep_or_drop(self.keep_drop.value)))
 
     @classmethod
-    def add(cls, gui, simulation, on, keep=None) -> FilterDebugger | None:
+    def add(cls, gui, simulation, on, keep=None, scene=None, rig=None) -> FilterDebugger | None:
         """The debugger for ``simulation`` (None without a filter tape)."""
-        return cls(gui, simulation.filter_tape().model.states, on, keep) if available(simulation) else None
+        return cls(gui, simulation.filter_tape().model.states, on, keep, scene, rig) if available(simulation) else None
 
     def show(self, running: bool, simulation) -> None:
         """Replay the tape when paused (newest sample shown); hide the views while running."""
         self.scrubber.disabled = running
         if running or not available(simulation):
             self.note.content, self.history = RUNNING_NOTE, None
+            if self.covariance is not None:
+                self.covariance.hide()                # the rig moves again
             return
         tape = simulation.filter_tape()
         key = (id(tape), tape.count, tape.chunks[-1][0] if tape.chunks else None)
@@ -261,6 +274,12 @@ class FilterDebugger:
         data, options = filter_branch.overlay_chart(self.history, row, pair[0], self.rerun, int(self.horizon.value))
         self.overlay.axes, self.overlay.scales, self.overlay.title = options["axes"], options["scales"], options["title"]
         self.overlay.data = data
+        if self.view_3d is not None:
+            if self.view_3d.value == THE_RIG:
+                self.covariance.hide()
+            else:
+                triple = self.triples[self.view_3d.options.index(self.view_3d.value) - 1]
+                self.covariance.show(self.history.sample(row), triple)
 
     def show_branch(self) -> None:
         if self.history is None:

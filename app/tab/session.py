@@ -311,7 +311,8 @@ class LabSession:
         self.controls.add_error_line(gui)         # under the buttons, in view (not at the foot of the controls)
         self.inspector = FilterInspector.add(gui, self.state.simulation, on("inspector step", self._step_one))
         self.debugger = FilterDebugger.add(gui, self.state.simulation, on, keep=lambda q, r, model: filter_branch.keep(
-            self.state.exercise, self.state.values_now(), model, q, r, self.controls.follow))
+            self.state.exercise, self.state.values_now(), model, q, r, self.controls.follow), scene=self.client.scene,
+            rig=self.scene)
         ActionPanel(gui, exercise, on, self.state.values_now, self._still_current(), self.gui_lock,
                     self.worker, self.client, plot_chart)   # the exercise's buttons, if any
         if self.scene is not None:

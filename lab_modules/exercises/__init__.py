@@ -162,7 +162,10 @@ class Simulation(Protocol):
 
 
 class SceneView(Protocol):
-    """An optional 3D view of an exercise in the tab's viser scene."""
+    """An optional 3D view of an exercise in the tab's viser scene; after ``attach``, ``root`` is
+    the frame every one of its nodes hangs from (the filter debugger hides it to show its own)."""
+
+    root: object
 
     def attach(self, scene) -> None:
         """Add the scene nodes once (``scene`` is the tab's ``viser.SceneApi``)."""

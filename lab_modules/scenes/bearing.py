@@ -166,7 +166,7 @@ class BearingScene:
         h = self.handles
         scene.set_up_direction("+z")
         wxyz, position = view_pose()
-        scene.add_frame(ROOT, show_axes=False, wxyz=wxyz, position=position)
+        self.root = scene.add_frame(ROOT, show_axes=False, wxyz=wxyz, position=position)
         vertices, faces = tube(STACK_LENGTH_M, BORE_RADIUS_M + POLE_LENGTH_M - 0.002, STATOR_RADIUS_M, 96)
         scene.add_mesh_simple(f"{ROOT}/stator/yoke", vertices, faces, color=STATOR, **NO_SHADOWS)
         h["coils"] = {}

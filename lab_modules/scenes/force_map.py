@@ -153,7 +153,7 @@ class _ForceMapBase:
     def _frame(self, scene) -> None:
         self.scene = scene
         scene.set_up_direction("+z")
-        scene.add_frame(ROOT, show_axes=False)
+        self.root = scene.add_frame(ROOT, show_axes=False)
         scene.add_line_segments(f"{ROOT}/box", box_lines(), AXIS_GREY, thickness=1.0, thickness_units="screen")
         h, z0 = HALF_WIDTH, -HEIGHT / 2
         for i in (-1.5, 0.0, 1.5):

@@ -182,7 +182,7 @@ class MaglevScene:
         h = self.handles
         scene.set_up_direction("+z")
         wxyz, position = view_pose(FACE_CENTRE_PX, 1e-3 / PX_PER_MM)
-        scene.add_frame(ROOT, show_axes=False, wxyz=wxyz, position=position)
+        self.root = scene.add_frame(ROOT, show_axes=False, wxyz=wxyz, position=position)
         # Markers drawn in front of the ball, yet where the ball's mid plane would show them: the
         # plane x = 0 scaled towards the camera (c, in the view's frame) onto x = FRONT_M.
         camera = tf.SO3(np.asarray(wxyz)).as_matrix().T @ (CAMERA_POSITION - position)

@@ -108,7 +108,8 @@ class RotorScene:
         g, h = self.geometry, self.handles
         scene.set_up_direction("+z")
         turn = 3 * np.pi / 4              # model x -> the camera's left-to-right
-        scene.add_frame(ROOT, show_axes=False, wxyz=(float(np.cos(turn / 2)), 0.0, 0.0, float(np.sin(turn / 2))))
+        self.root = scene.add_frame(ROOT, show_axes=False,
+                                    wxyz=(float(np.cos(turn / 2)), 0.0, 0.0, float(np.sin(turn / 2))))
         radius = g.shaft_diameter_m / 2
         self.rest, faces = shaft_mesh(self._x(self.stations_m), radius)
         h["shaft"] = scene.add_mesh_simple(f"{ROOT}/rotor/shaft", self.rest, faces, color=STEEL, scale=VIEW_SCALE)

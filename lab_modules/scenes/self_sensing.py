@@ -57,7 +57,7 @@ class SelfSensingScene:
         h = self.handles
         scene.set_up_direction("+z")
         wxyz, position = view_pose(FACE_CENTRE_PX, 1e-3 / PX_PER_MM)
-        scene.add_frame(ROOT, show_axes=False, wxyz=wxyz, position=position)
+        self.root = scene.add_frame(ROOT, show_axes=False, wxyz=wxyz, position=position)
         vertices, faces = _upright(*tube(CORE_HEIGHT_M, 0.0, CORE_RADIUS_M, 48))
         scene.add_mesh_simple(f"{ROOT}/core", vertices, faces, color=FERRITE,
                               position=(0.0, 0.0, CORE_HEIGHT_M / 2), **NO_SHADOWS)

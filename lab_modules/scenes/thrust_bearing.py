@@ -52,7 +52,7 @@ class ThrustBearingScene:
         h = self.handles
         scene.set_up_direction("+z")
         wxyz, position = view_pose(CENTRE_PX, METRES_PER_PX)
-        scene.add_frame(ROOT, show_axes=False, wxyz=wxyz, position=position)
+        self.root = scene.add_frame(ROOT, show_axes=False, wxyz=wxyz, position=position)
         depth = 0.05
         scene.add_box(f"{ROOT}/shaft", IRON, (depth, SHAFT_WIDTH_M, SHAFT_HEIGHT_M), **NO_SHADOWS)
         offset = GAP_DRAWN_M + COLLAR_HEIGHT_M / 2 + STATOR_HEIGHT_M / 2
