@@ -77,6 +77,11 @@ class StickyRange:
             return self.follow(math.inf, -math.inf, now)
         return self.follow(float(finite.min()), float(finite.max()), now)
 
+    def fit(self, low: float, high: float) -> None:
+        """At once the range that ``follow`` would shrink to (the traces stopped moving)."""
+        if low <= high:
+            self.range, self.loose_since = nice_range(low, high), None
+
     def follow(self, low: float, high: float, now: float | None = None) -> bool:
         """``update`` from the lowest and highest finite value drawn (nothing finite: low > high);
         called once per frame."""

@@ -82,12 +82,15 @@ class ScopeCharts:
         self.drawn_until = None                   # the next frame draws them
 
     def draw(self, buffer: np.ndarray, sample_time_s: float, window_ms: float, now: float,
-             closed=lambda: False) -> None:
-        """Send the charts: only when new samples arrived, as float32, and only the rows
-        ``scope_rows`` picks (the chart's pixel width, not the buffer's length); call inside
-        the frame's one atomic block."""
-        if len(buffer) < 2 or buffer[-1, 0] == self.drawn_until:
-            return
+             closed=lambda: False, fit: bool = False) -> bool:
+        """Send the charts: only when new samples arrived (or to ``fit`` the y ranges to the
+        traces at once, a stopped run's), as float32, and only the rows ``scope_rows`` picks (the
+        chart's pixel width, not the buffer's length); call inside the frame's one atomic block.
+        Whether it drew (or, fitting, found nothing to fit)."""
+        if len(buffer) < 2:
+            return fit
+        if buffer[-1, 0] == self.drawn_until and not fit:
+            return False
         self.drawn_until = buffer[-1, 0]
         if self.time_axis == SINCE_RESET:
             rows, frame_ms, page_start_s = page(buffer, window_ms)
@@ -106,7 +109,10 @@ class ScopeCharts:
             band = 2 if chart.band else 0
             if band and not chart.band_in_range:  # the range follows the series; the band is cut at its edges
                 low, high = finite_extremes(ys[band:])
-            y_range.follow(low, high, now)
+            if fit:
+                y_range.fit(low, high)
+            else:
+                y_range.follow(low, high, now)
             if band and not chart.band_in_range and y_range.shown() is not None:
                 np.clip(ys[:band], *y_range.shown(), out=ys[:band])
             if page_start_s is not None:
@@ -114,6 +120,7 @@ class ScopeCharts:
                 t32 = t_ms.astype(np.float32)
             send_data(handle, (t32 if float32_time else t_ms, *ys, scope.anchor(y_range.shown()),
                                scope.layout(self.frames_drawn)))
+        return True
 
 
 def page(buffer: np.ndarray, window_ms: float) -> tuple[np.ndarray, float, float]:

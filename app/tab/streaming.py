@@ -49,6 +49,7 @@ class Stream:
         self.scene, self.scene_view, self.scope, self.live = scene, scene_view, scope, live
         self.status, self.refresh_readouts, self.problems = status, refresh_readouts, problems
         self.stop_shown: tuple | None = None       # (message, simulation) of a stop not shown yet
+        self.fitted = False                       # the scope's ranges fit the traces of a stopped run
         self.ticker: frames.Ticker | None = None
 
     def start(self) -> None:
@@ -113,9 +114,13 @@ class Stream:
             carry += lab.values.get("time_scale", 1.0) * elapsed / lab.simulation.sample_time_s
         if not lab.lock.acquire(timeout=FRAME_LOCK_WAIT_S):
             return carry, next_scene, next_readouts
+        if not lab.running:
+            lab.lock.release()
+            if not self.fitted:
+                self.fit_ranges(now)
+            return 0.0, next_scene, next_readouts
+        self.fitted = False
         try:
-            if not lab.running:
-                return 0.0, next_scene, next_readouts
             steps, carry = int(carry), carry - int(carry)
             meter = self.status.meter
             timed = meter.timed()                 # a CPU-clock read is a system call: not every frame
@@ -149,6 +154,20 @@ class Stream:
         finally:
             self.gui_lock.release()
         return carry, next_scene, next_readouts
+
+    def fit_ranges(self, now: float) -> None:
+        """Once a run stops or pauses, the scope's y ranges close in on what it shows (while it ran
+        they held still and shrank only after ``scope.SHRINK_AFTER_S``: a start-up transient that
+        left the window last could keep a range far too wide on the stopped scope)."""
+        if not self.gui_lock.acquire(timeout=FRAME_LOCK_WAIT_S):
+            return
+        try:
+            if self.is_current(self.generation):
+                lab = self.state
+                self.fitted = self.scope.draw(lab.buffer, lab.simulation.sample_time_s, lab.window_ms(), now,
+                                              closed=lambda: not self.is_current(self.generation), fit=True)
+        finally:
+            self.gui_lock.release()
 
     def draw(self, now: float) -> None:
         """The scope and live plots at the newest samples (call holding ``gui_lock``)."""
