@@ -19,34 +19,26 @@ import pytest
 
 from lab_modules.exercises import get
 from tests.wsclient import (
+    READOUTS,
     REPO,
     RawTab,
     lab_process,
+    lab_tab,
     process_cpu_s,
     process_rss_mb,
     process_threads,
     run_async,
+    url,
 )
 
 pytestmark = pytest.mark.classroom
 
 NOISE = "Position sensor noise σ [µm]"
 SCOPE = "Rotor position [µm]"
-READOUTS = "| quantity | value | unit |"
 LOADED_FACTOR = 1.5        # on a machine busy without any flood: what the flood may cost at most
 #: The round trip's quiet median comes from only 8 samples on a machine whose load swings within
 #: seconds (52 ms quiet, 118 ms flooded at load 12 on 2 cores); before the fix a flood cost seconds.
 LOADED_ROUND_TRIP_FACTOR = 3.0
-
-
-def url(port: int) -> str:
-    return f"http://127.0.0.1:{port}"
-
-
-async def _lab_tab(port: int, timeout: float = 120.0) -> RawTab:
-    tab = await RawTab().connect(url(port))
-    assert await tab.wait_for(lambda: tab.find_containing("GuiMarkdownMessage", READOUTS), timeout)
-    return tab
 
 
 def _analysis_rows(content: str) -> list[str]:
@@ -75,7 +67,7 @@ def test_flood_from_one_tab_does_not_hurt_another(tmp_path):
     port = 8121
     with lab_process(port, data_dir=tmp_path, log=tmp_path / "server.log") as server:
         async def scenario():
-            tab = await _lab_tab(port)
+            tab = await lab_tab(port)
             slider = tab.find("GuiSliderMessage", NOISE)
             readouts = tab.find_containing("GuiMarkdownMessage", READOUTS)
             scope = tab.find("GuiUplotMessage", SCOPE)
@@ -128,7 +120,7 @@ def test_churn_leaks_no_threads_or_memory(tmp_path):
     port = 8122
     with lab_process(port, data_dir=tmp_path, log=tmp_path / "server.log") as server:
         async def scenario():
-            warm = await _lab_tab(port)                    # compile and cache everything once
+            warm = await lab_tab(port)                    # compile and cache everything once
             await warm.close()
             async def cycles(n):
                 for cycle in range(n):
@@ -163,7 +155,7 @@ def test_switch_burst_leaves_a_running_simulation(tmp_path):
     with lab_process(port, data_dir=tmp_path, log=log):
         async def scenario():
             from lab_modules.exercises import registry
-            tab = await _lab_tab(port)
+            tab = await lab_tab(port)
             titles = [e.title for e in registry().values()]
             start = time.perf_counter()
             for i in range(30):
@@ -197,7 +189,7 @@ def test_invalid_messages_are_answered_and_logged_once(tmp_path):
     log = tmp_path / "server.log"
     with lab_process(port, data_dir=tmp_path, log=log):
         async def scenario():
-            tab = await _lab_tab(port)
+            tab = await lab_tab(port)
             slider = tab.find("GuiSliderMessage", NOISE)
             for i in range(200):
                 await tab.websocket.send(b"\xc1not msgpack" if i % 3 == 0 else
@@ -237,7 +229,7 @@ def test_oversized_upload_is_refused_before_any_part(tmp_path):
     log = tmp_path / "server.log"
     with lab_process(port, "--exercise", "maglev_tuning", data_dir=tmp_path, log=log) as server:
         async def scenario():
-            tab = await _lab_tab(port)
+            tab = await lab_tab(port)
             upload = tab.find("GuiUploadButtonMessage", "Load recording (CSV)")
             rss = [process_rss_mb(server.pid)]
             part = b"0" * 10_000_000
@@ -271,7 +263,7 @@ def test_saved_experiment_survives_sigkill(tmp_path):
     edited = "\n".join(lines[:-3000]).encode() + b"\n"       # a shorter recording than the shipped one
     with lab_process(port, "--exercise", "maglev_tuning", data_dir=tmp_path, log=tmp_path / "a.log") as server:
         async def first():
-            tab = await _lab_tab(port)
+            tab = await lab_tab(port)
             upload = tab.find("GuiUploadButtonMessage", "Load recording (CSV)")
             await tab.send({"type": "FileTransferStartUpload", "source_component_uuid": upload, "transfer_uuid": "u",
                             "filename": "short.csv", "mime_type": "text/csv", "part_count": 1,
@@ -295,7 +287,7 @@ def test_saved_experiment_survives_sigkill(tmp_path):
         server.wait(10)
     with lab_process(port, data_dir=tmp_path, log=tmp_path / "b.log"):
         async def second():
-            tab = await _lab_tab(port)
+            tab = await lab_tab(port)
             field = tab.find("GuiTextMessage", "Experiment code")
             await tab.set_value(field, code.lower())
             await tab.set_value(tab.find("GuiButtonGroupMessage", "Experiment"), "Open")

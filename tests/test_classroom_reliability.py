@@ -16,24 +16,13 @@ import msgspec
 import pytest
 
 from tests.test_store_access import damaged_database
-from tests.wsclient import CAMERA, REPO, RawTab, lab_process, run_async
+from tests.wsclient import CAMERA, READOUTS, REPO, RawTab, lab_process, lab_tab, run_async, url
 
 pytestmark = pytest.mark.classroom
 
 NOISE = "Position sensor noise σ [µm]"
 SCOPE = "Rotor position [µm]"
-READOUTS = "| quantity | value | unit |"
 ENV = {**os.environ, "PYTHONPATH": str(REPO)}
-
-
-def url(port: int) -> str:
-    return f"http://127.0.0.1:{port}"
-
-
-async def _lab_tab(port: int, timeout: float = 120.0) -> RawTab:
-    tab = await RawTab().connect(url(port))
-    assert await tab.wait_for(lambda: tab.find_containing("GuiMarkdownMessage", READOUTS), timeout)
-    return tab
 
 
 def _markdown(tab: RawTab, text: str) -> str:
@@ -64,7 +53,7 @@ def test_a_full_disk_leaves_tabs_running_and_saves_again_with_room(tmp_path):
     data = tmp_path / "data"
     with lab_process(port, data_dir=data, log=log) as server:
         async def scenario():
-            tab = await _lab_tab(port)
+            tab = await lab_tab(port)
             assert await tab.wait_for(lambda: _markdown(tab, "This tab is autosaved as"), 30)
             _file_size_limit(server.pid, max(path.stat().st_size for path in data.iterdir()))
             slider = tab.find("GuiSliderMessage", NOISE)
@@ -75,7 +64,7 @@ def test_a_full_disk_leaves_tabs_running_and_saves_again_with_room(tmp_path):
             readouts = _markdown(tab, READOUTS)
             await tab.set_value(slider, 1.6)
             answered = await tab.wait_for(lambda: _markdown(tab, READOUTS) != readouts, 30)
-            second = await _lab_tab(port)
+            second = await lab_tab(port)
             second_streams = await _streams(second)
             _file_size_limit(server.pid, resource.RLIM_INFINITY)
             again = await tab.wait_for(lambda: _markdown(tab, "Autosaved again"), 60)
@@ -97,7 +86,7 @@ def test_a_damaged_database_leaves_tabs_running(tmp_path):
     damaged_database(tmp_path / "data")
     with lab_process(port, data_dir=tmp_path / "data", log=log):
         async def scenario():
-            tab = await _lab_tab(port)
+            tab = await lab_tab(port)
             failed = await tab.wait_for(lambda: _markdown(tab, "Autosave failed"), 30)
             updates = await _streams(tab)
             await tab.close()
@@ -155,7 +144,7 @@ def test_save_on_a_full_disk_exits_2_with_one_line(tmp_path):
 
 async def _unfinished_uploads(port: int, count: int, part: bytes) -> RawTab:
     """A maglev_tuning tab that starts ``count`` uploads of 30 parts and sends 20 parts of each."""
-    tab = await _lab_tab(port)
+    tab = await lab_tab(port)
     upload = tab.find("GuiUploadButtonMessage", "Load recording (CSV)")
     for k in range(count):
         await tab.send({"type": "FileTransferStartUpload", "source_component_uuid": upload, "transfer_uuid": f"t{k}",
@@ -174,7 +163,7 @@ def test_unfinished_uploads_are_bounded_per_tab(tmp_path):
     port = 8464
     with lab_process(port, "--exercise", "maglev_tuning", data_dir=tmp_path, log=tmp_path / "server.log") as server:
         async def scenario():
-            warm = await _lab_tab(port)
+            warm = await lab_tab(port)
             await asyncio.sleep(2)
             start = process_rss_mb(server.pid)
             part = b"1" * 512 * 1024
@@ -196,7 +185,7 @@ def test_tabs_beyond_max_tabs_wait_at_a_full_note_and_enter_when_a_place_frees(t
     log = tmp_path / "server.log"
     with lab_process(port, "--max-tabs", "2", data_dir=tmp_path, log=log):
         async def scenario():
-            first, second = await _lab_tab(port), await _lab_tab(port)
+            first, second = await lab_tab(port), await lab_tab(port)
             third = await RawTab().connect(url(port))
             full = await third.wait_for(lambda: _markdown(third, "The lab is full"), 60)
             await asyncio.sleep(3)
@@ -259,7 +248,7 @@ def test_memory_returns_after_many_tabs_close(tmp_path):
     port = 8466
     with lab_process(port, data_dir=tmp_path, log=tmp_path / "server.log") as server:
         async def scenario():
-            warm = await _lab_tab(port)
+            warm = await lab_tab(port)
             await warm.close()
             await asyncio.sleep(5)
             start = process_rss_mb(server.pid)
@@ -360,7 +349,7 @@ def test_a_tab_may_change_only_what_a_browser_changes(tmp_path):
     log = tmp_path / "server.log"
     with lab_process(port, data_dir=tmp_path, log=log):
         async def scenario():
-            tab = await _lab_tab(port)
+            tab = await lab_tab(port)
             slider = tab.find("GuiSliderMessage", NOISE)
             chooser = tab.find("GuiDropdownMessage", "Exercise")
             for updates in ({"update_cb": []}, {"removed": True}, {"value": 1.2, "sync_cb": None}):

@@ -242,3 +242,18 @@ def run_async(coroutine):
     if "error" in outcome:
         raise outcome["error"]
     return outcome["value"]
+
+
+#: the readouts table's header: a tab that shows it has built its lab
+READOUTS = "| quantity | value | unit |"
+
+
+def url(port: int) -> str:
+    return f"http://127.0.0.1:{port}"
+
+
+async def lab_tab(port: int, timeout: float = 120.0) -> RawTab:
+    """A raw tab on the lab at ``port``, once its readouts table is there."""
+    tab = await RawTab().connect(url(port))
+    assert await tab.wait_for(lambda: tab.find_containing("GuiMarkdownMessage", READOUTS), timeout)
+    return tab
