@@ -182,9 +182,11 @@ def whirl_by_mode(s: np.ndarray, share: np.ndarray) -> np.ndarray:
     ``share[j, k]`` is mode j's part in eigenvalue k; each mode takes, among the eigenvalues of
     its whirl direction (Im s < 0 backward, >= 0 forward), the one it has the largest part in,
     the most distinct modes choosing first, each eigenvalue used once; a pole that does not
-    oscillate (|Im s| < 0.5 Hz) only when no oscillating one is left."""
+    oscillate only when no oscillating one is left.  Not oscillating: |Im s| < 0.5 Hz, or a
+    damping ratio zeta = -Re s / |s| above 0.95 (a compensator's real pole, which the gyroscopic
+    coupling moves off the real axis by a fraction of a hertz at speed)."""
     chosen = np.zeros((share.shape[0], 2), dtype=int)
-    still = np.abs(s.imag) < np.pi
+    still = (np.abs(s.imag) < np.pi) | (-s.real > 0.95 * np.abs(s))
     for direction, side in enumerate((s.imag < 0, s.imag >= 0)):
         candidates = np.where(side[None, :], share - 2.0 * still[None, :], -np.inf)
         taken: set[int] = set()
