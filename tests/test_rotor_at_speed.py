@@ -35,6 +35,7 @@ from lab_modules.plants.spinning_rotor import (
     two_plane_matrices,
     whirl_frequencies_hz,
 )
+from lab_modules.scenes.rotor import VIEW_SCALE
 
 SPEEDS_CHECKED_RPM = (0.0, 3000.0, 6000.0)
 
@@ -282,6 +283,9 @@ def test_whirl_scene_attaches_updates_and_animates_in_a_real_viser_scene():
         moved = view.handles["shaft"].vertices - view.rest
         assert np.ptp(moved[:, 1]) > 0.01 and np.ptp(moved[:, 2]) > 0.01      # both planes
         assert view.frequency_hz < 0                                           # backward
+        for marker, radius in zip(view.handles["markers"], view.orbit_radius):  # on its orbit (its parent)
+            x, y, z = marker.position
+            assert x == 0.0 and np.hypot(y, z) == pytest.approx(VIEW_SCALE * radius, rel=1e-5)
     finally:
         server.stop()
 
