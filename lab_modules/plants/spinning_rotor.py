@@ -38,11 +38,13 @@ G in mm/s) keeps a permissible residual unbalance U = m G / Omega_max [kg m]; at
 speed Omega it pulls with F = U Omega^2 e^{i Omega t}, a forward synchronous force.
 The lab places it at the lamination stack (the bearing plane).
 
-Displacement zones of ISO 14839-2 (rotating machinery with active magnetic bearings),
-as read here: the peak displacement relative to the touchdown bearing's minimum
-clearance C_min decides the zone, A below 0.3 C_min (newly commissioned), B below
-0.4 C_min (unrestricted long-term operation), C below 0.5 C_min (limited operation),
-D beyond (damage possible).
+Displacement zones of ISO 14839-2:2004 (rotating machinery with active magnetic
+bearings, part 2: evaluation of vibration), its table of zone limits for the shaft
+displacement at rated speed, as fractions of the touchdown bearing's minimum clearance
+C_min: A below 0.3 C_min (newly commissioned), B below 0.4 C_min (unrestricted
+long-term operation), C below 0.5 C_min (limited operation), D beyond (damage
+possible).  The lab reads the displacement as the orbit's radius (zero to peak) at the
+bearing.
 """
 
 from __future__ import annotations
