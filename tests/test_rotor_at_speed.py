@@ -35,6 +35,7 @@ from lab_modules.plants.spinning_rotor import (
     two_plane_matrices,
     whirl_frequencies_hz,
 )
+from lab_modules.scenes.rotor import VIEW_SCALE
 
 SPEEDS_CHECKED_RPM = (0.0, 3000.0, 6000.0)
 
@@ -167,6 +168,29 @@ def test_external_sensor_mode_3_backward_whirl_stays_unstable_at_speed():
     assert swept.damping[0, 2, 1] < 0 < swept.damping[-1, 2, 1]
 
 
+def test_every_whirl_stays_a_whirl_over_speed():
+    """External sensor: the compensator's real pole, which the gyroscopic coupling moves off the
+    real axis by half a hertz above 6000 rpm, is never taken for mode 1's forward whirl (it was,
+    and drew a jump to 100 % damping and a false critical speed near 6100 rpm)."""
+    values = ras.EXERCISE.resolve({"sensor_offset_mm": 60.0})
+    swept = sweep(ras.loop(values))
+    assert np.all(swept.damping[:, 0, :] < 0.5) and np.all(swept.whirl_hz[:, 0, 1] > 200.0)
+    criticals = [c for j in range(swept.whirl_hz.shape[1])
+                 for c in critical_speeds_rpm(ras.CAMPBELL_SPEEDS_RPM, swept.whirl_hz[:, j, 1])]
+    assert len(criticals) == 1 and 7000.0 < criticals[0] < 9000.0
+
+
+def test_external_sensor_is_stabilisable_at_a_lower_gain_up_to_a_speed():
+    """Some gain factor keeps the external sensor's loop stable at low speed, none above the
+    bisected speed (checked on both sides of it)."""
+    values = ras.EXERCISE.resolve({"sensor_offset_mm": 60.0})
+    limits = ras.largest_stable_gain(values, 60.0)
+    up_to = ras.stabilisable_up_to_rpm(values, 60.0, limits)
+    assert limits[0] > 0 and 1000.0 < up_to < 12000.0
+    assert ras.largest_stable_gain(values, 60.0, [up_to - 10.0])[0] > 0
+    assert ras.largest_stable_gain(values, 60.0, [up_to + 10.0])[0] == 0
+
+
 def test_iso_figures():
     """ISO 21940-11: 25 kg at G 2.5 and 3000 rpm: U = 25 * 2.5e-3 / 314.16 = 199 g mm; ISO 14839-2
     zones as fractions 0.3 / 0.4 / 0.5 of C_min."""
@@ -259,6 +283,9 @@ def test_whirl_scene_attaches_updates_and_animates_in_a_real_viser_scene():
         moved = view.handles["shaft"].vertices - view.rest
         assert np.ptp(moved[:, 1]) > 0.01 and np.ptp(moved[:, 2]) > 0.01      # both planes
         assert view.frequency_hz < 0                                           # backward
+        for marker, radius in zip(view.handles["markers"], view.orbit_radius):  # on its orbit (its parent)
+            x, y, z = marker.position
+            assert x == 0.0 and np.hypot(y, z) == pytest.approx(VIEW_SCALE * radius, rel=1e-5)
     finally:
         server.stop()
 

@@ -94,6 +94,7 @@ MIDSPAN_M = 0.45
 CLEARANCE_UM = 1e6 * RIG.delta0_m / 2                      # touchdown bearing: half the air gap (230 µm)
 SENSORS = {"integrated (collocated)": 0.0, f"external (+{EXTERNAL_OFFSET_MM:.0f} mm)": EXTERNAL_OFFSET_MM}
 MODE_COLOURS = ("#1f77b4", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22")
+SET_SPEED_COLOUR = "#e7298a"
 BACKWARD_COLOURS = ("#9ecae1", "#a1d99b", "#fc9272", "#bcbddc", "#c49c94", "#f7b6d2", "#9edae5", "#dbdb8d")
 
 P = Parameter
@@ -271,6 +272,23 @@ def stability_changes_rpm(values: dict, sensor_offset_mm: float, flags: np.ndarr
                 high = mid
         changes.append((0.5 * (low + high), "regains" if flags[k + 1] else "loses"))
     return changes
+
+
+def stabilisable_up_to_rpm(values: dict, sensor_offset_mm: float, limits: np.ndarray) -> float | None:
+    """The speed [rpm] above which no gain factor keeps the loop stable (``limits``: the largest
+    stable gain per ``LIMIT_SPEEDS_RPM``), bisected to 10 rpm where the first stable speed's
+    limit first drops to 0; None when some gain is stable at every speed or at none."""
+    stable_somewhere = np.flatnonzero(limits > 0)
+    if stable_somewhere.size == 0:
+        return None
+    lost = np.flatnonzero(limits[stable_somewhere[0]:] == 0)
+    if lost.size == 0:
+        return None
+    low, high = LIMIT_SPEEDS_RPM[stable_somewhere[0] + lost[0] - 1], LIMIT_SPEEDS_RPM[stable_somewhere[0] + lost[0]]
+    while high - low > 10.0:
+        mid = 0.5 * (low + high)
+        low, high = (mid, high) if largest_stable_gain(values, sensor_offset_mm, [mid])[0] > 0 else (low, mid)
+    return 0.5 * (low + high)
 
 
 def free_whirl(values: dict) -> np.ndarray:
@@ -484,6 +502,7 @@ class RotorAtSpeed(Exercise):
             "largest_stable_gain_external": limit_external.tolist(),
             "largest_stable_gain_collocated_min": float(np.min(limit_collocated)),
             "largest_stable_gain_external_max": float(np.max(limit_external)),
+            "external_stabilisable_up_to_rpm": stabilisable_up_to_rpm(values, EXTERNAL_OFFSET_MM, limit_external),
             "unbalance_kg_m": unbalance_kg_m(values),
             "peak_unbalance_bearing_um": float(bearing[peak] * 1e6),
             "peak_unbalance_sensor_um": float(np.max(np.abs(response[:, LOOP_OUTPUTS.index("r_sensor_m")])) * 1e6),
@@ -584,7 +603,9 @@ def over_speed(values: dict):
         verdict = ("stable over the whole range" if sensors[name].stable.all() else
                    "unstable over the whole range" if not sensors[name].stable.any() else
                    "; ".join(f"{what} stability at {rpm:.0f} rpm" for rpm, what in changes))
-        notes.append(f"{name.capitalize()} sensor at these gains: {verdict}.")
+        up_to = stabilisable_up_to_rpm(values, o, limits[name])
+        notes.append(f"{name.capitalize()} sensor at these gains: {verdict}." + (
+            "" if up_to is None else f" A lower gain keeps it stable up to {up_to:.0f} rpm, none above."))
         readouts.append((f"{name.capitalize()}: largest stable gain factor, lowest over speed",
                          float(np.min(limits[name])), "×"))
     plots += [damping_plot(name, sensors[name]) for name in SENSORS]
@@ -609,8 +630,8 @@ def campbell_plot(values: dict, free: np.ndarray, swept, criticals: list[float])
         series.append((f"mode {j + 1} forward, bearing off", free[:, j, 1], "#7f7f7f"))
         series.append((f"mode {j + 1} backward, bearing off", -free[:, j, 0], "#c7c7c7"))
     top = float(np.nanmax(swept.whirl_hz[:, :shown])) * 1.05
-    marks = [("set speed", values["speed_rpm"], 0.0, top, "#000000")]
-    marks += [("critical speeds", c, c / 60 - 40.0, c / 60 + 40.0, "#e6550d") for c in criticals]
+    marks = [("set speed n (cursor)", values["speed_rpm"], 0.0, top, SET_SPEED_COLOUR)]
+    marks += [("critical speeds (forward whirl meets 1×)", c, 0.0, top, "#e6550d") for c in criticals]
     x, out = with_marks(CAMPBELL_SPEEDS_RPM, series, marks)
     x = x / 1000
     return Plot(f"Campbell diagram ({values['beam_theory']}; closed loop with the {sensor_name(values['sensor_offset_mm'])}"
@@ -640,7 +661,8 @@ def unbalance_plot(values: dict, response: np.ndarray, midspan_m: np.ndarray) ->
     clearance_um = values["clearance_um"]
     series = [(f"rotor at mid-span ({MIDSPAN_M * 1e3:.0f} mm)", midspan_m * 1e6, "#9467bd"), ("rotor at the bearing", np.abs(response[:, LOOP_OUTPUTS.index("r_bearing_m")]) * 1e6, "#1f77b4"),
               ("rotor at the sensor", np.abs(response[:, LOOP_OUTPUTS.index("r_sensor_m")]) * 1e6, "#ff7f0e"),
-              ("control current × 10 µm/A", np.abs(response[:, LOOP_OUTPUTS.index("current_a")]) * 10, "#2ca02c"),
+              ("control current (1 A drawn as 10 µm)", np.abs(response[:, LOOP_OUTPUTS.index("current_a")]) * 10,
+               "#2ca02c"),
               ("filter innovation ν", np.abs(response[:, LOOP_OUTPUTS.index("innovation_m")]) * 1e6, "#d62728")]
     colours = {"A": "#31a354", "B": "#fdae6b", "C": "#e6550d"}
     series += [(f"zone {zone}/{chr(ord(zone) + 1)} limit {limit:.1f} C_min", np.full(len(CAMPBELL_SPEEDS_RPM),

@@ -38,11 +38,13 @@ G in mm/s) keeps a permissible residual unbalance U = m G / Omega_max [kg m]; at
 speed Omega it pulls with F = U Omega^2 e^{i Omega t}, a forward synchronous force.
 The lab places it at the lamination stack (the bearing plane).
 
-Displacement zones of ISO 14839-2 (rotating machinery with active magnetic bearings),
-as read here: the peak displacement relative to the touchdown bearing's minimum
-clearance C_min decides the zone, A below 0.3 C_min (newly commissioned), B below
-0.4 C_min (unrestricted long-term operation), C below 0.5 C_min (limited operation),
-D beyond (damage possible).
+Displacement zones of ISO 14839-2:2004 (rotating machinery with active magnetic
+bearings, part 2: evaluation of vibration), its table of zone limits for the shaft
+displacement at rated speed, as fractions of the touchdown bearing's minimum clearance
+C_min: A below 0.3 C_min (newly commissioned), B below 0.4 C_min (unrestricted
+long-term operation), C below 0.5 C_min (limited operation), D beyond (damage
+possible).  The lab reads the displacement as the orbit's radius (zero to peak) at the
+bearing.
 """
 
 from __future__ import annotations
@@ -182,9 +184,11 @@ def whirl_by_mode(s: np.ndarray, share: np.ndarray) -> np.ndarray:
     ``share[j, k]`` is mode j's part in eigenvalue k; each mode takes, among the eigenvalues of
     its whirl direction (Im s < 0 backward, >= 0 forward), the one it has the largest part in,
     the most distinct modes choosing first, each eigenvalue used once; a pole that does not
-    oscillate (|Im s| < 0.5 Hz) only when no oscillating one is left."""
+    oscillate only when no oscillating one is left.  Not oscillating: |Im s| < 0.5 Hz, or a
+    damping ratio zeta = -Re s / |s| above 0.95 (a compensator's real pole, which the gyroscopic
+    coupling moves off the real axis by a fraction of a hertz at speed)."""
     chosen = np.zeros((share.shape[0], 2), dtype=int)
-    still = np.abs(s.imag) < np.pi
+    still = (np.abs(s.imag) < np.pi) | (-s.real > 0.95 * np.abs(s))
     for direction, side in enumerate((s.imag < 0, s.imag >= 0)):
         candidates = np.where(side[None, :], share - 2.0 * still[None, :], -np.inf)
         taken: set[int] = set()

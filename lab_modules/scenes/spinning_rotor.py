@@ -156,5 +156,5 @@ class WhirlScene:
                                         r[b].real + rim * np.cos(spin))
         h["stripe"].wxyz = _about_x(-spin)
         at = [int(np.argmin(np.abs(self.stations_m - z))) for z in self.orbit_at]
-        for marker, k in zip(h["markers"], at):
-            marker.position = self._at(self._x(self.stations_m[k]), r[k].imag, r[k].real)
+        for marker, k in zip(h["markers"], at):                    # a child of its orbit: relative to it
+            marker.position = self._at(0.0, r[k].imag, r[k].real)
