@@ -192,6 +192,48 @@ def test_the_instructor_page_needs_its_own_token_sees_the_class_and_exports(tmp_
     assert INSTRUCTOR_TOKEN not in student_saw and INSTRUCTOR_TOKEN not in teacher_saw
 
 
+def test_the_instructor_creates_an_assignment_in_the_page(tmp_path):
+    """``?instructor`` without a code: the form refuses a bad line in one line naming its field and
+    creates what the command line would, with the student link."""
+    port = 8944
+    with _served(tmp_path, port):
+        async def scenario():
+            teacher = await _tab(port)
+            await _open_link(teacher, "?instructor")
+            token = await teacher.wait_for(lambda: teacher.find("GuiTextMessage", "Instructor token"), 30)
+            await teacher.set_value(token, INSTRUCTOR_TOKEN)
+            await teacher.set_value(teacher.find("GuiButtonMessage", "Open the instructor page"), True)
+            about = await teacher.wait_for(lambda: teacher.find_containing("GuiMarkdownMessage", "Metrics a spec"), 60)
+            fields = {label: teacher.find("GuiTextMessage", label)
+                      for label in ("Title", "Drawn per student", "Locked", "Specs", "Deadline")}
+            await teacher.set_value(fields["Title"], "Filter the noise")
+            await teacher.set_value(fields["Drawn per student"], "sensor_noise_um=1.0..1.6\ncurrent_noise_a=2.2..1.5")
+            await teacher.set_value(fields["Locked"], "sensor_lag_us")
+            await teacher.set_value(fields["Specs"], "\n".join(SPECS))
+            create = teacher.find("GuiButtonMessage", "Create the assignment")
+            await teacher.set_value(create, True)
+            refused = await teacher.wait_for(lambda: teacher.find_containing("GuiMarkdownMessage", "⚠️"), 60)
+            refusal = teacher.elements[refused]["content"]
+            await teacher.set_value(fields["Drawn per student"], "sensor_noise_um=1.0..1.6\ncurrent_noise_a=1.5..2.2")
+            await teacher.set_value(create, True)
+            assert await teacher.wait_for(lambda: "Created" in (teacher.elements[refused]["content"] or ""), 60)
+            created = teacher.elements[refused]["content"]
+            await teacher.close()
+            return teacher.elements[about]["content"], refusal, created
+        about, refusal, created = run_async(scenario())
+    print(f"\n{refusal}\n{created}")
+    assert "`sensor_noise_um`" in about and "`current_noise_reduction_percent`" in about
+    assert refusal.count("\n") == 0 and "Drawn per student:" in refusal and "LOW must be below HIGH" in refusal
+    code = created.split("**")[1].replace("\\", "")                  # markdown-escaped hyphens
+    assert f"(?assignment={code})" in created and f"?instructor={code}" in created
+    _, assignment = coursework.load(open_store(None, tmp_path), code)
+    assert assignment.title == "Filter the noise" and assignment.locked == ("sensor_lag_us",)
+    assert [(v.parameter, v.low, v.high) for v in assignment.variations] == [
+        ("sensor_noise_um", 1.0, 1.6), ("current_noise_a", 1.5, 2.2)]
+    assert [(spec.metric, spec.relation, spec.bound, spec.points) for spec in assignment.specs] == [
+        ("current_noise_reduction_percent", ">=", 75.0, 2.0), ("max_gain_factor_estimated", ">=", 3.0, 2.0)]
+
+
 def test_one_student_cannot_see_or_submit_for_another(tmp_path, capsys):
     """Each tab shows only its own student's plant and results; a tab that joined as one student
     cannot submit for another (the id is given once, the dialog is gone); a wrong code opens nothing."""

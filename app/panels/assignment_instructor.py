@@ -28,7 +28,8 @@ class InstructorGate:
         self.modal = gui.add_modal("Instructor page")
         with self.modal:
             gui.add_markdown("The assignment's students, submissions and gradebook. Enter the **instructor "
-                             "token** the lab's server printed at start (not the class token).")
+                             "token** the lab's server printed at start (not the class token); leave the "
+                             "code empty to create a new assignment.")
             self.token = gui.add_text("Instructor token", "")
             self.code = gui.add_text("Assignment code", code)
             button = gui.add_button("Open the instructor page")

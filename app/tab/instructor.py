@@ -1,7 +1,8 @@
-"""A tab as an assignment's instructor page (``?instructor=CODE``): behind the instructor token,
-which is compared on the server and never sent to any tab; wrong tries count like wrong class
-tokens (per tab, then per address across tabs).  Once in, the tab's lab stops and the page shows
-the class, refreshing every ``REFRESH_S`` on the tab's worker."""
+"""A tab as an assignment's instructor page (``?instructor=CODE``), or the form for a new one
+(``?instructor`` without a code): behind the instructor token, which is compared on the server
+and never sent to any tab; wrong tries count like wrong class tokens (per tab, then per address
+across tabs).  Once in, the tab's lab stops and the page shows the class, refreshing every
+``REFRESH_S`` on the tab's worker, or the form."""
 
 from __future__ import annotations
 
@@ -12,6 +13,13 @@ from collections.abc import Callable
 from app.infra import coursework
 from app.infra.access import Throttle, token_matches
 from app.infra.store import Store, StoreError
+from app.panels.assignment_form import (
+    AssignmentForm,
+    AssignmentRequest,
+    created_markdown,
+    exercise_markdown,
+    in_form_words,
+)
 from app.panels.assignment_instructor import (
     InstructorGate,
     InstructorPage,
@@ -24,6 +32,8 @@ from app.tab.gate import TOKEN_ATTEMPTS, TOKEN_RETRY_S
 from app.tab.worker import TabClosed, TabWorker
 from lab_modules.evaluation import assignments
 from lab_modules.evaluation.assignments import Assignment
+from lab_modules.exercises import get, registry
+from lab_modules.parameters import ParameterError
 
 REFRESH_S = 2.0                   # the page looks for new submissions this often
 
@@ -43,6 +53,8 @@ class InstructorTab:
         self.code: str | None = None
         self.assignment: Assignment | None = None
         self.listed: dict[str, object] = {}       # dropdown label -> submission
+        self.form: AssignmentForm | None = None
+        self.metrics_of_defaults: dict[str, dict] = {}   # exercise -> one run's metrics (the specs' names)
 
     def offer(self, code: str, warn: Callable[[str], None]) -> None:
         """The link asks for the instructor page: the gate (``warn``: a line in the tab)."""
@@ -55,7 +67,7 @@ class InstructorTab:
 
     def check(self, token: str, code: str) -> None:
         """The gate's button: a right token and a known code open the page."""
-        if self.page is not None:
+        if self.page is not None or self.form is not None:
             return
         wait_s = self.tries.wait_s(self.address) if self.tries is not None else 0.0
         if wait_s > 0:
@@ -72,6 +84,9 @@ class InstructorTab:
             self.gate.message.content = (f"⚠️ That is not the instructor token ({TOKEN_ATTEMPTS - self.attempts} "
                                          "tries left).")
             return
+        if not code.strip():
+            self._open_form()
+            return
         try:
             self.code, self.assignment = coursework.load(self.store, code)
         except StoreError as error:
@@ -85,6 +100,41 @@ class InstructorTab:
                                        self.open_submission)
         self.refresh()
         threading.Thread(target=self._keep_fresh, name=f"{self.worker.name}-instructor", daemon=True).start()
+
+    def _open_form(self) -> None:
+        """The form for a new assignment, on the first exercise."""
+        self.gate.close()
+        self.gate = None
+        self.leave_lab()
+        exercises = registry()
+        with self.gui_lock:
+            self.form = AssignmentForm(self.client.gui, exercises, self.worker.on, self.create, self.describe)
+        self.describe(next(iter(exercises)))
+
+    def describe(self, name: str) -> None:
+        """The chosen exercise's parameters and gradable metrics (one run on its defaults, once)."""
+        exercise = get(name)
+        if name not in self.metrics_of_defaults:
+            values = exercise.resolve({})
+            values.pop("data", None)
+            self.metrics_of_defaults[name] = exercise.metrics(values, exercise.default_duration_s)
+        metrics = [m for m, value in self.metrics_of_defaults[name].items() if assignments.gradable(value)]
+        with self.gui_lock:
+            self.form.about.content = exercise_markdown(exercise, metrics)
+
+    def create(self, request: AssignmentRequest) -> None:
+        """Check the form as the command line would, keep the assignment, give its links."""
+        try:
+            assignment = assignments.new_assignment(
+                request.exercise, request.title or None, request.varied, request.locked, request.specs,
+                request.deadline, request.counts, metrics_of_defaults=self.metrics_of_defaults.get(request.exercise))
+            code = coursework.create(self.store, assignment)
+        except (ParameterError, StoreError) as error:
+            message = f"⚠️ {escaped(in_form_words(str(error)))}"
+        else:
+            message = created_markdown(code, assignment.title, assignment.points)
+        with self.gui_lock:
+            self.form.message.content = message
 
     def _keep_fresh(self) -> None:
         while not self.worker.closed:
