@@ -19,12 +19,12 @@ from filterpy.kalman import KalmanFilter as FilterpyKalmanFilter
 from lab_modules.estimators.thrust_kalman import PAPER_Q_N2, ThrustFilterDesign, process_noise_from_p0
 from lab_modules.exercises._thrust_liftoff_labels import liftoff_gap_evidence, median_standard_error
 from lab_modules.exercises.thrust_liftoff import EXERCISE, setup
+from lab_modules.loops.thrust_liftoff_linear import linear_loop
 from lab_modules.loops.thrust_liftoff_loop import (
     NO_LIFTOFF,
     TOUCHDOWN,
     ThrustSetup,
     ThrustSimulation,
-    linear_loop,
 )
 from lab_modules.plants.thrust_bearing import PAPER_P0, TABLE_1, current_loop, discrete_current_loop
 

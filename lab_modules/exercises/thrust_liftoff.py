@@ -39,13 +39,8 @@ from lab_modules.estimators.thrust_kalman import PAPER_Q_N2, H
 from lab_modules.exercises import POLE_MAP, SCOPE, Analysis, Chart, Exercise, Plot, PoleCategory, Series
 from lab_modules.exercises._common import pairs
 from lab_modules.exercises._thrust_liftoff_labels import liftoff_gap_evidence, median_standard_error
-from lab_modules.loops.thrust_liftoff_loop import (
-    ThrustSetup,
-    ThrustSimulation,
-    liftoff_figures,
-    linear_loop,
-    loop_at_plant_input,
-)
+from lab_modules.loops.thrust_liftoff_linear import linear_loop, loop_at_plant_input
+from lab_modules.loops.thrust_liftoff_loop import ThrustSetup, ThrustSimulation, liftoff_figures
 from lab_modules.memo import remembered
 from lab_modules.parameters import Parameter, in_si
 from lab_modules.plants.thrust_bearing import TABLE_1
@@ -432,7 +427,7 @@ class ThrustLiftoff(Exercise):
         """The two measured-feedback loops and the filter's error by their states (paper 003: the
         collar's x, v of eq. 5, the current loop G(s) of Fig. 7, the PID's integral, its previous
         error (the difference quotient's one-sample delay) and its filtered D term; the filter's
-        x, v error of eq. 13-17), in ``thrust_liftoff_loop._linear_step``'s order."""
+        x, v error of eq. 13-17), in ``thrust_liftoff_linear._linear_step``'s order."""
         s = setup(values)
         collar = [("x [m]", "collar position/velocity (levitation mode)"),
                   ("v [m/s]", "collar position/velocity (levitation mode)")]
