@@ -225,6 +225,8 @@ def readouts(results: dict) -> list[tuple[str, float, str]]:
         for f, found in tests.items():
             out += [(f"Drift: {test.name}, {f}, {name} (95 %: {test.lower:.2f}–{test.upper:.2f}, {test.verdict})",
                      test.mean, "") for test in found]
+    ratios = results["identifiers"]["miso_over_siso"]
+    out += [(f"Drift: force-error RMS, MISO / SISO ADALINE, {name}", ratio, "×") for name, ratio in ratios.items()]
     return out
 
 
