@@ -160,3 +160,15 @@ def test_scope_carries_the_drift_run_and_its_live_consistency():
     live = EXERCISE.live_readouts(named)
     assert sum(label.startswith("Drift: NIS") for label, _, _ in live) == len(FILTERS)
     assert all(np.isfinite(value) for _, value, _ in live)
+
+
+def test_miso_identifier_is_worse_at_the_points_and_faster_after_the_step():
+    """The SISO and MISO ADALINEs on the same drift runs and force sensor (``identifier_errors``):
+    the MISO's local slopes must be learnt again at each point, its two weights follow the step
+    faster; each RMS is the a-priori force error, so an identifier that learns nothing scores
+    the step's whole force change."""
+    found = drift_results(EXERCISE.resolve({}))["identifiers"]
+    ratio = found["miso_over_siso"]
+    assert ratio["point 1"] > 1.3 and ratio["point 2"] > 1.3 and ratio["the move"] > 1.5
+    assert ratio["after the change"] < 1.0
+    assert found["siso_rms_n"]["point 1"] < 0.15      # 10 % of k_Magnet at point 1 would be about 1.5 N

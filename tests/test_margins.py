@@ -182,7 +182,7 @@ def test_margins_of_every_loop(name, settings):
 def test_broken_loops_close_to_the_exercises_own_loops():
     """Closing L at gain 1 gives the loops the exercises simulate and analyse on their own."""
     from lab_modules.exercises import sensor_placement, thrust_liftoff
-    from lab_modules.loops.thrust_liftoff_loop import linear_loop
+    from lab_modules.loops.thrust_liftoff_linear import linear_loop
 
     values = get("thrust_liftoff").resolve({"feedback": "estimated"})
     loop = next(iter(get("thrust_liftoff").open_loops(values).values()))

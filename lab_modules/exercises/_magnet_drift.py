@@ -24,6 +24,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from lab_modules.estimators.adaline import miso_run, siso_step
 from lab_modules.estimators.filter_consistency import (
     ConsistencyTest,
     integrated_autocorrelation_time,
@@ -40,7 +41,7 @@ from lab_modules.loops.magnet_drift_loop import (
     DriftSimulation,
 )
 from lab_modules.parameters import Parameter, in_si
-from lab_modules.plants.axial_bearing import AXIAL
+from lab_modules.plants.axial_bearing import AXIAL, force_shape
 
 T = DriftSimulation.sample_time_s
 PERIOD_S = 0.8
@@ -48,6 +49,8 @@ POINT1_END_S = 0.45
 WINDOWS = {"point 1": (0.35, 0.45), "point 2": (0.7, 0.8)}
 BIAS_SEEDS = 8
 SMOOTHING_S = 0.01
+MISO_RATE = 0.1                # 1/A²: the MISO ADALINE's step (stiffness_map's default; i in A, x in mm)
+MISO_SEED_OFFSET = 7919        # the force sensor's noise is drawn apart from the loop's
 PEAK_SEARCH_S = 0.05           # the adaptive bias peaks within this time after the change
 LABELS = {"fixed": "fixed k_i, k_s", "offline": "scheduled offline (FBFNN, nominal law)",
           "adaptive": "adaptive (FBFNN × k̂/k₀, ADALINE)", "exact": "exact (EKF, true k_Magnet)"}
@@ -126,6 +129,51 @@ def consistency(trace: np.ndarray, window: tuple[float, float]) -> dict[str, tup
     return out
 
 
+def identifier_errors(traces: list[np.ndarray], values: dict, start_s: float, seed: int) -> dict[str, float]:
+    """SISO against MISO ADALINE on the same drift runs (issue: "the MISO variant where it helps").
+
+    Both run offline over each run's coil current i, the adaptive filter's x̂ and a force sensor
+    (the true magnet force plus white noise σ_F, drawn from ``seed`` + ``MISO_SEED_OFFSET``), so they
+    differ only in their structure: SISO F̂ = k̂ φ(i, x̂) (eq. 1, one weight for the whole map, η of
+    the exercise); MISO F̂ = w_i i + w_s x̂ (x in mm, the local slopes, η = ``MISO_RATE``), both from
+    the nominal law.  Returns the RMS of the a-priori F̂ − F [N] over the seeds in each of
+    ``identifier_windows`` (keys "siso_rms_n", "miso_rms_n") and their ratios ("miso_over_siso")."""
+    gap, bias = AXIAL.nominal_gap_m, AXIAL.bias_current_a
+    windows = identifier_windows(start_s)
+    errors = {"siso": [], "miso": []}
+    rng = np.random.default_rng(seed + MISO_SEED_OFFSET)
+    for trace in traces:
+        current = np.ascontiguousarray(trace[:, COLUMN["current_a"]])
+        x_hat = trace[:, COLUMN["x_true_m"]] + trace[:, COLUMN["adaptive_x_error_m"]]
+        force = trace[:, COLUMN["magnet_force_n"]]
+        sensed = force + values["force_sensor_noise_n"] * rng.standard_normal(force.size)
+        phi = force_shape(current, x_hat, gap, bias) * 1e-6                  # φ [A²/mm²]
+        k_hat, siso = K_NOMINAL_MM, np.empty(force.size)
+        for k in range(force.size):
+            siso[k] = k_hat * phi[k]                                         # a priori F̂ = k̂ φ
+            k_hat = siso_step(k_hat, phi[k], sensed[k], values["adaline_rate"])
+        weights = np.array([4 * K_NOMINAL_MM * bias / (gap * 1e3) ** 2,      # k_i = 4 k_M i0 / s0² [N/A]
+                            4 * K_NOMINAL_MM * bias**2 / (gap * 1e3) ** 3])  # k_s = 4 k_M i0² / s0³ [N/mm]
+        miso = np.empty((force.size, 3))
+        miso_run(weights, current, np.ascontiguousarray(x_hat * 1e3), np.ascontiguousarray(sensed), MISO_RATE, miso)
+        errors["siso"].append(siso - force)
+        errors["miso"].append(miso[:, 0] - force)
+    t = traces[0][:, 0]
+    out = {"siso_rms_n": {}, "miso_rms_n": {}, "miso_over_siso": {}}
+    for name, (a, b) in windows.items():
+        inside = (t >= a) & (t < b)
+        for kind, per_run in errors.items():
+            out[f"{kind}_rms_n"][name] = float(np.sqrt(np.mean([np.mean(e[inside] ** 2) for e in per_run])))
+        out["miso_over_siso"][name] = out["miso_rms_n"][name] / out["siso_rms_n"][name]
+    return out
+
+
+def identifier_windows(start_s: float) -> dict[str, tuple[float, float]]:
+    """The windows of ``identifier_errors`` [s]: 100 ms after the change, point 1, the move, point 2."""
+    return {"after the change": (start_s, start_s + 0.1), "point 1": WINDOWS["point 1"],
+            "the move": (POINT1_END_S, WINDOWS["point 2"][0]), "point 2": WINDOWS["point 2"]}
+
+
 def drift_results(values: dict, loop: LoopSetup) -> dict:
     """The seeds' runs: mean bias curves, the time to 10 %, the windows' biases and consistency."""
     setup = drift_setup(values, loop)
@@ -149,7 +197,8 @@ def drift_results(values: dict, loop: LoopSetup) -> dict:
     return {"t": t, "bias": bias, "k_estimate": np.mean([r[0][:n, COLUMN["k_magnet_estimate"]] for r in runs], axis=0),
             "k_true": trace[:n, COLUMN["k_magnet_true"]], "time_to_10pct_ms": float(time_ms),
             "stated_ms": stated_time_ms(values), "windows": windows, "status": status or "ok",
-            "consistency": {name: consistency(trace, w) for name, w in WINDOWS.items()}, "trace": trace}
+            "consistency": {name: consistency(trace, w) for name, w in WINDOWS.items()}, "trace": trace,
+            "identifiers": identifier_errors([r[0][:n] for r in runs], values, start, seed)}
 
 
 def plots(results: dict) -> list[Plot]:
@@ -176,6 +225,8 @@ def readouts(results: dict) -> list[tuple[str, float, str]]:
         for f, found in tests.items():
             out += [(f"Drift: {test.name}, {f}, {name} (95 %: {test.lower:.2f}–{test.upper:.2f}, {test.verdict})",
                      test.mean, "") for test in found]
+    ratios = results["identifiers"]["miso_over_siso"]
+    out += [(f"Drift: force-error RMS, MISO / SISO ADALINE, {name}", ratio, "×") for name, ratio in ratios.items()]
     return out
 
 

@@ -13,7 +13,9 @@ Per sample k:
              integral stops while the output is clipped and growing (anti-windup)
 5. current   coil current i from the command through G(s) (§3.1, ZOH), or i = i_c
 6. filter    prediction with the *measured* coil current i (eq. 14-15): G(s)
-             is outside the filter's model
+             is outside the filter's model; the fixed Taylor or exact matrices, or
+             re-linearised at the estimate (``estimators.thrust_ekf``), then the
+             touchdown stop if the filter knows it
 7. plant     one sample of eq. 5 (linear, exact ZOH) or of eq. 2-3 (nonlinear,
              RK4), force disturbance f_dis held over the sample, gravity in the
              vertical variant; the touchdown bearing stops the collar at
@@ -22,26 +24,30 @@ Per sample k:
 The gains are in SI units here (Kp [A/m] ...); the exercise converts the
 paper's A/mm.  The kernel releases the GIL, so browser tabs run in parallel.
 It takes named bundles: ``Collar``, ``CurrentLoop``, the filter's
-``kalman.LinearFilter``, ``LiftoffPID`` and ``LiftoffNoise``.
+``kalman.LinearFilter`` and ``thrust_ekf.ThrustPrediction``, ``LiftoffPID`` and ``LiftoffNoise``.
+The loop as a linear system (poles, noise, margins) is ``loops.thrust_liftoff_linear``.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from functools import cached_property
 from typing import NamedTuple
 
-import control
 import numba
 import numpy as np
-import scipy.linalg
 import scipy.signal
 
-from lab_modules import analysis
-from lab_modules.estimators.filter_history import FilterModel, FilterTape
-from lab_modules.estimators.kalman import STATE_SIZE, correction, predict, update
+from lab_modules.estimators.filter_history import FilterTape
+from lab_modules.estimators.kalman import STATE_SIZE, correction, update
+from lab_modules.estimators.thrust_ekf import history_model, predict_thrust, thrust_prediction
 from lab_modules.estimators.thrust_kalman import H, ThrustFilterDesign
-from lab_modules.plants.thrust_bearing import GRAVITY_M_PER_S2, TABLE_1, ThrustBearing, discrete_current_loop
+from lab_modules.plants.thrust_bearing import (
+    GRAVITY_M_PER_S2,
+    TABLE_1,
+    ThrustBearing,
+    discrete_current_loop,
+    force_and_stiffness,
+)
 
 OK, DIVERGED, TOUCHDOWN, NO_LIFTOFF = 0, 1, 2, 3
 JIT = {"nogil": True, "cache": True, "error_model": "numpy"}
@@ -51,6 +57,7 @@ KERNEL_COLUMNS = ("x_true_m", "x_measured_m", "x_estimated_m", "x_sigma_m", "vel
                   "velocity_estimated_m_per_s", "current_command_a", "current_a", "kalman_gain_x",
                   "estimation_error_m")
 FILTER_TITLE = "Kalman filter of the thrust bearing (paper 003 §3)"
+EXTENDED_FILTER_TITLE = "Extended Kalman filter of the thrust bearing (paper 003 §1.2, eq. 2 re-linearised)"
 STATES = (("collar position x", "m"), ("collar velocity v", "m/s"))
 MEASUREMENTS = (("position sensor Z", "m"),)
 #: Constant columns the simulation adds (lines on the scope).
@@ -71,11 +78,8 @@ def _acceleration(x, i, f_ext, nonlinear, c):
     m = c[0]
     if not nonlinear:
         return (c[1] * i + c[2] * x + f_ext) / m
-    i0, k_f, x0, g_min = c[3], c[4], c[5], c[6]
-    upper, lower = max(i0 + i, 0.0), max(i0 - i, 0.0)
-    gap_upper, gap_lower = max(x0 - x, g_min), max(x0 + x, g_min)
-    return (k_f * (upper * upper / (gap_upper * gap_upper) - lower * lower / (gap_lower * gap_lower))
-            + f_ext) / m
+    force, _ = force_and_stiffness(x, i, c)
+    return (force + f_ext) / m
 
 
 @numba.njit(**JIT)
@@ -139,12 +143,13 @@ class LiftoffNoise(NamedTuple):
 
 
 @numba.njit(**JIT)
-def run(n_steps, first_step, T, collar, current_loop, kalman, pid, noise, trace):
+def run(n_steps, first_step, T, collar, current_loop, kalman, prediction, pid, noise, trace):
     """Advance the loop by ``n_steps`` samples of T [s] (module docstring).
 
     collar : ``Collar``, the true state, plant and touchdown bearing (state and lift-off in place);
     current_loop : ``CurrentLoop``, G(s) (state in place);
     kalman : ``kalman.LinearFilter``, the filter, padded to ``STATE_SIZE`` (in place);
+    prediction : ``thrust_ekf.ThrustPrediction``, fixed or re-linearised model, stop known or not;
     pid : ``LiftoffPID``, gains and state (in place);
     noise : ``LiftoffNoise`` for the sensor and the force;
     trace (n_steps, 1 + len(KERNEL_COLUMNS)) output.
@@ -202,7 +207,7 @@ def run(n_steps, first_step, T, collar, current_loop, kalman, pid, noise, trace)
         trace[k, 9] = gain[0, 0]
         trace[k, 10] = x_hat[0] - plant[0]
         # 6. filter prediction with the measured coil current
-        predict(x_hat, P, A_f, B_f, i, Q_f, work_x, work_P)
+        predict_thrust(x_hat, P, A_f, B_f, i, Q_f, prediction, work_x, work_P)
         # 7. plant and touchdown bearing
         f_ext = noise_sigma[1] * draws[k, 1] + gravity_n
         if nonlinear:
@@ -255,11 +260,15 @@ class ThrustSetup:
     sensor_noise_correlation_s: float = 0.0        # > 0: first-order coloured sensor noise (std stays σ_v)
     noise_on: bool = True                          # False: the same run without any noise draws
     filter_exact_model: bool = False               # True: the filter on the exact ZOH matrices, not eq. 9-11
+    filter_extended: bool = False                  # True: eq. 2 re-linearised at the estimate every sample
+    filter_knows_stop: bool = False                # True: the filter clamps its prediction at the stop
 
     @property
     def design(self) -> ThrustFilterDesign:
+        """The linear filter; the extended one starts from its Taylor matrices and shares its steady
+        state at the centre (``estimators.thrust_ekf``)."""
         return ThrustFilterDesign(self.filter_q_n2, self.filter_r_factor * self.sensor_noise_m**2, self.bearing,
-                                  self.filter_exact_model)
+                                  self.filter_exact_model and not self.filter_extended)
 
     @property
     def gravity_n(self) -> float:
@@ -312,7 +321,8 @@ class ThrustSimulation:
         G_A, G_B, G_C, G_D = self._current
         self._current_loop = CurrentLoop(active=s.current_loop, state=self.coil, A=G_A, B=G_B, C=G_C, D=G_D)
         self._kalman = kf.arrays()
-        self.tape = FilterTape(FilterModel.of_filter(kf, FILTER_TITLE, b.sample_time_s, STATES, MEASUREMENTS))
+        self._prediction = thrust_prediction(b, s.filter_extended, s.filter_knows_stop)
+        self.tape = FilterTape(history_model(kf, self._prediction, self.filter_title, STATES, MEASUREMENTS))
         self._pid = LiftoffPID(state=self.pid, proportional_a_per_m=s.proportional_a_per_m,
                                integral_a_per_m_s=s.integral_a_per_m_s, derivative_a_s_per_m=s.derivative_a_s_per_m,
                                derivative_filter=self._derivative_filter, current_limit_a=s.current_limit_a,
@@ -367,7 +377,7 @@ class ThrustSimulation:
 
         def part(first: int, last: int) -> tuple[int, int]:
             return run(last - first, self.step + first, b.sample_time_s, self._collar, self._current_loop,
-                       self._kalman, self._pid, LiftoffNoise(draws=noise[first:last], sigma=self._sigma),
+                       self._kalman, self._prediction, self._pid, LiftoffNoise(draws=noise[first:last], sigma=self._sigma),
                        trace[first:last])
 
         prior = kf.state.copy(), kf.P.copy()
@@ -402,9 +412,15 @@ class ThrustSimulation:
         kf = self.filter
         n = kf.dim_x
         step = correction(x_prior[:n], P_prior[:n, :n], kf.C[:, :n], kf.R_diag, y)
-        return {"title": FILTER_TITLE, "time_s": float(time_s), "states": STATES, "x": step["x"],
+        return {"title": self.filter_title, "time_s": float(time_s), "states": STATES, "x": step["x"],
                 "P": step["P"], "measurements": MEASUREMENTS, "K": step["K"],
                 "innovation": step["innovation"], "innovation_sigma": np.sqrt(np.diag(step["S"]))}
+
+    @property
+    def filter_title(self) -> str:
+        s = self.setup
+        title = EXTENDED_FILTER_TITLE if s.filter_extended else FILTER_TITLE
+        return title + (", touchdown stop in the model" if s.filter_knows_stop else "")
 
     def filter_tape(self) -> FilterTape:
         """The record of the filter's inputs since the last launch or retune (``estimators.filter_history``)."""
@@ -428,148 +444,6 @@ class ThrustSimulation:
                 NO_LIFTOFF: f"no lift-off: the collar still rests on the touchdown bearing after "
                             f"{MAX_REST_S * 1e3:.0f} ms."}[self.status]
         return text + (" " + self.explanation if self.explanation else "")
-
-
-@dataclass(frozen=True)
-class LinearLoop:
-    """The loop of ``run`` on the linear plant, without saturation or stops, with the
-    steady-state filter gain K∞:  s_{k+1} = M s_k + N n_k,  y_k = C s_k + D n_k,
-    noise n = (sensor V [m], force f_dis [N]) per sample.
-
-    State: plant (x, v), G(s) (2, if on), integral, previous error, derivative term,
-    filter prediction (x̂, v̂) (if ``with_filter``).  Outputs: ``OUTPUTS``."""
-
-    M: np.ndarray
-    N: np.ndarray
-    C: np.ndarray
-    D: np.ndarray
-
-    def poles(self) -> np.ndarray:
-        """z-plane poles."""
-        return np.linalg.eigvals(self.M)
-
-    def stable(self) -> bool:
-        return bool(np.max(np.abs(self.poles())) < 1.0)
-
-    def output_std(self, sensor_noise_m: float, force_noise_n: float) -> dict[str, float]:
-        """Steady-state standard deviation of each output for white noise of these
-        standard deviations (discrete Lyapunov equation, scipy); inf when a mode the noise
-        reaches is unstable."""
-        per_sensor, per_force = self.unit_variances
-        var = sensor_noise_m**2 * per_sensor + force_noise_n**2 * per_force
-        return {name: float(np.sqrt(max(v, 0.0))) for name, v in zip(OUTPUTS, var)}
-
-    @cached_property
-    def unit_variances(self) -> tuple[np.ndarray, np.ndarray]:
-        """Output variances for unit white sensor noise and unit white force (the two add)."""
-        # the states span metres to amperes: balance M first (X = S X' S^T), or the solve is ill-conditioned
-        M, (scale, _) = scipy.linalg.matrix_balance(self.M, permute=False, separate=True)
-        out = []
-        for j in range(self.N.shape[1]):
-            n = self.N[:, j] / scale
-            Q = excited_subspace(M, n)
-            reached = Q.T @ M @ Q
-            if Q.shape[1] and np.max(np.abs(np.linalg.eigvals(reached))) >= 1.0:
-                out.append(np.full(self.C.shape[0], np.inf))
-                continue
-            X = scale[:, None] * (Q @ scipy.linalg.solve_discrete_lyapunov(reached, np.outer(Q.T @ n, Q.T @ n))
-                                  @ Q.T) * scale[None, :]
-            out.append(np.einsum("ij,jk,ik->i", self.C, X, self.C) + self.D[:, j] ** 2)
-        return out[0], out[1]
-
-
-def excited_subspace(M: np.ndarray, n: np.ndarray, tolerance: float = 1e-6) -> np.ndarray:
-    """An orthonormal basis Q of the states the noise input ``n`` reaches: span(n, M n, M² n, ...)
-    (Krylov, each new direction orthogonalised twice and kept if more than ``tolerance`` of it is
-    new).  The steady-state covariance X = M X Mᵀ + n nᵀ lives there, X = Q X_q Qᵀ; a mode the noise
-    does not reach, such as the integrator of a PID with Ki = 0 (a pole at z = 1), would make the
-    Lyapunov equation on all states singular."""
-    basis: list[np.ndarray] = []
-    candidates = [n]
-    while candidates and len(basis) < M.shape[0]:
-        vector = candidates.pop()
-        size = np.linalg.norm(vector)
-        for _ in range(2):
-            for q in basis:
-                vector = vector - (q @ vector) * q
-        if size > 0 and np.linalg.norm(vector) > tolerance * size:
-            basis.append(vector / np.linalg.norm(vector))
-            candidates.append(M @ basis[-1])
-    return np.column_stack(basis) if basis else np.zeros((M.shape[0], 0))
-
-
-#: Outputs of ``LinearLoop``: true x, measured z, corrected estimate x̂ [m], current command [A].
-OUTPUTS = ("x_true_m", "x_measured_m", "x_estimated_m", "current_command_a")
-
-
-def _linear_step(setup: ThrustSetup, with_g: bool, with_filter: bool):
-    """(number of states, step): one sample of ``run`` on the linear plant, without saturation or
-    stops, written like the kernel.  ``step(state, noise, injected=None)`` returns (next state,
-    outputs ``OUTPUTS``); with ``injected`` the plant side (G(s), coil, filter prediction with the
-    measured current) is driven by it instead of the PID's command: the loop broken at the plant input."""
-    s, b = setup, setup.bearing
-    T = b.sample_time_s
-    Phi, _, Gamma = b.exact_discretisation()
-    G_A, G_B, G_C, G_D = discrete_current_loop(T)
-    Phi_f, B_f, _ = s.design.matrices
-    K = s.design.steady_state[0]
-    alpha = s.derivative_filter_s / (s.derivative_filter_s + T)
-    o = 4 if with_g else 2                         # index of the integral
-    n = o + 3 + (2 if with_filter else 0)
-
-    def step(state, noise, injected=None):
-        x = state[:2]
-        g = state[2:4] if with_g else np.zeros(2)
-        integral, previous, d_term = state[o], state[o + 1], state[o + 2]
-        z = x[0] + noise[0]
-        x_pred = state[o + 3:o + 5] if with_filter else np.zeros(2)
-        x_corr = x_pred + K * (z - x_pred[0])
-        e = -(x_corr[0] if s.use_estimate else z)
-        raw_d = (-s.derivative_a_s_per_m * x_corr[1] if s.use_estimate and s.derivative_from_velocity
-                 else s.derivative_a_s_per_m * (e - previous) / T)
-        d_new = alpha * d_term + (1 - alpha) * raw_d
-        command = s.proportional_a_per_m * e + integral + d_new
-        drive = command if injected is None else injected
-        i = G_C @ g + G_D * drive if with_g else drive
-        out = np.empty(n)
-        out[:2] = Phi @ x + Gamma * (b.current_stiffness_n_per_a * i + noise[1])
-        if with_g:
-            out[2:4] = G_A @ g + G_B * drive
-        out[o], out[o + 1], out[o + 2] = integral + s.integral_a_per_m_s * T * e, e, d_new
-        if with_filter:
-            out[o + 3:o + 5] = Phi_f @ x_corr + B_f * i
-        return out, np.array([x[0], z, x_corr[0], command])
-    return n, step
-
-
-def linear_loop(setup: ThrustSetup, current_loop: bool | None = None, with_filter: bool = True) -> LinearLoop:
-    """``LinearLoop`` of ``setup`` (G(s) as set, or forced on/off by ``current_loop``).
-    Built by pushing unit vectors through one step written like the kernel's, so the
-    pole map and the noise analysis describe the loop that runs.  ``with_filter=False``
-    drops the filter's states (only allowed for measured feedback, where the filter
-    is outside the loop)."""
-    with_g = setup.current_loop if current_loop is None else current_loop
-    if not with_filter and setup.use_estimate:
-        raise ValueError("the filter is inside the loop when the estimate is fed back")
-    n, step = _linear_step(setup, with_g, with_filter)
-    zero_state, zero_noise = np.zeros(n), np.zeros(2)
-    by_state = [step(column, zero_noise) for column in np.eye(n)]
-    by_noise = [step(zero_state, column) for column in np.eye(2)]
-    return LinearLoop(M=np.column_stack([r[0] for r in by_state]), N=np.column_stack([r[0] for r in by_noise]),
-                      C=np.column_stack([r[1] for r in by_state]), D=np.column_stack([r[1] for r in by_noise]))
-
-
-def loop_at_plant_input(setup: ThrustSetup) -> control.StateSpace:
-    """Open loop L broken at the current command i_c (S = 1 / (1 + L)): the linear loop of
-    ``linear_loop`` with a signal injected where the plant side reads the command and the PID's
-    command read back, sign included.  The filter's prediction uses the measured coil current,
-    so the filter sits on both sides of the break only through its states."""
-    n, step = _linear_step(setup, setup.current_loop, True)
-
-    def broken(state, injected):
-        state_next, outputs = step(state, np.zeros(2), injected[0])
-        return state_next, outputs[3:]            # the current command
-    return -analysis.state_space_from_step(broken, n, 1, setup.bearing.sample_time_s)
 
 
 def liftoff_figures(trace: dict[str, np.ndarray], start_m: float, column: str = "x_true_m") -> dict:

@@ -35,6 +35,7 @@ from functools import lru_cache
 import control
 import numpy as np
 import scipy.linalg
+from numba import njit
 
 #: §3.1: identified current loop, coil current over current command.
 CURRENT_LOOP_NUMERATOR = (0.1034, 2234.0, 7.237e5)
@@ -122,6 +123,29 @@ class ThrustBearing:
         return np.array([self.mass_kg, self.current_stiffness_n_per_a, self.negative_stiffness_n_per_m,
                          self.bias_current_a, self.force_constant_n_m2_per_a2, self.gap_m,
                          MIN_MAGNETIC_GAP_M])
+
+
+@njit(cache=True, nogil=True)
+def force_and_stiffness(x_m, control_current_a, constants):
+    """Eq. 2 at (i_x, x): the force f [N] and its slope ∂f/∂x [N/m] at the current held, for the
+    compiled loop; ``constants`` = ``ThrustBearing.force_constants``.  Each coil's current is clipped
+    at 0 and each gap at the smallest gap (``magnetic_force_n``); a clipped gap adds no slope.
+    At the centre ∂f/∂x = 4 k_f i0² / x0³ = |k_x| (eq. 4)."""
+    i0, k_f, x0, smallest_gap = constants[3], constants[4], constants[5], constants[6]
+    upper, lower = max(i0 + control_current_a, 0.0), max(i0 - control_current_a, 0.0)
+    gap_upper, gap_lower = x0 - x_m, x0 + x_m
+    slope = 0.0
+    if gap_upper > smallest_gap:
+        pull_upper = k_f * upper * upper / (gap_upper * gap_upper)     # f+ = k_f (i0 + i)² / (x0 − x)²
+        slope += 2.0 * pull_upper / gap_upper                          # ∂f+/∂x = 2 f+ / (x0 − x)
+    else:
+        pull_upper = k_f * upper * upper / (smallest_gap * smallest_gap)
+    if gap_lower > smallest_gap:
+        pull_lower = k_f * lower * lower / (gap_lower * gap_lower)     # f− = k_f (i0 − i)² / (x0 + x)²
+        slope += 2.0 * pull_lower / gap_lower                          # −∂f−/∂x = 2 f− / (x0 + x)
+    else:
+        pull_lower = k_f * lower * lower / (smallest_gap * smallest_gap)
+    return pull_upper - pull_lower, slope
 
 
 @lru_cache(maxsize=16)
