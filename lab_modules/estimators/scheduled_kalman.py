@@ -75,6 +75,30 @@ def process_noise(physics, B, Q):
 
 
 @njit(cache=True, nogil=True)
+def product(left, right, out):
+    """out = left @ right for the filter's small matrices: plain loops (a BLAS call and its
+    temporaries cost more than the 64 products of a 4×4; the kernels call this several times a sample)."""
+    for r in range(left.shape[0]):
+        for c in range(right.shape[1]):
+            acc = 0.0
+            for j in range(left.shape[1]):
+                acc += left[r, j] * right[j, c]
+            out[r, c] = acc
+
+
+@njit(cache=True, nogil=True)
+def sandwich(left, P, out, work):
+    """out = left P leftᵀ (``work``: a scratch matrix of P's size)."""
+    product(left, P, work)
+    for r in range(out.shape[0]):
+        for c in range(out.shape[1]):
+            acc = 0.0
+            for j in range(work.shape[1]):
+                acc += work[r, j] * left[c, j]
+            out[r, c] = acc
+
+
+@njit(cache=True, nogil=True)
 def correct(z, P, y, var_sensor):
     """Eq. 11-13 with H = (0, 0, 0, 1), P in Joseph form (exact for this H)."""
     s = P[3, 3] + var_sensor
@@ -86,14 +110,33 @@ def correct(z, P, y, var_sensor):
     IKH = np.eye(N_STATES)
     for r in range(N_STATES):
         IKH[r, 3] -= K[r]
-    P[:, :] = IKH @ P @ IKH.T + var_sensor * np.outer(K, K)
+    work = np.empty((N_STATES, N_STATES))
+    sandwich(IKH, P, P, work)
+    for r in range(N_STATES):
+        for c in range(N_STATES):
+            P[r, c] += var_sensor * K[r] * K[c]
+
+
+@njit(cache=True, nogil=True)
+def propagate_covariance(P, A, Q):
+    """P ← A P Aᵀ + Q (eq. 10), in place."""
+    work, out = np.empty((N_STATES, N_STATES)), np.empty((N_STATES, N_STATES))
+    sandwich(A, P, out, work)
+    for r in range(N_STATES):
+        for c in range(N_STATES):
+            P[r, c] = out[r, c] + Q[r, c]
 
 
 @njit(cache=True, nogil=True)
 def predict_linear(z, P, A, B, Q, current_a):
     """Eq. 9-10."""
-    z[:] = A @ z + B[:, 0] * current_a + B[:, 1]
-    P[:, :] = A @ P @ A.T + Q
+    previous = z.copy()
+    for r in range(N_STATES):
+        acc = 0.0
+        for c in range(N_STATES):
+            acc += A[r, c] * previous[c]
+        z[r] = acc + B[r, 0] * current_a + B[r, 1]
+    propagate_covariance(P, A, Q)
 
 
 @njit(cache=True, nogil=True)
@@ -113,7 +156,7 @@ def predict_exact_force(z, P, physics, current_a, A, B, Q):
     z[1] = v + T * accel
     z[2] = f
     z[3] = a * xm + physics[SENSOR_GAIN] * (1.0 - a) * x
-    P[:, :] = A @ P @ A.T + Q
+    propagate_covariance(P, A, Q)
 
 
 class AxialKalmanFilter:
