@@ -166,32 +166,31 @@ def normalised_errors(z, P, truth):
     states (x, v, F_St) with their block of P [-]: P⁻¹ e by Gaussian elimination with partial
     pivoting (as LAPACK's solver; on a 3×3 the call itself would cost more than the sum)."""
     n = NEES_STATES
-    M, b = np.empty((n, n)), np.empty(n)
+    M = np.empty((n, n + 1))                      # [P block | e], reduced in place
     for r in range(n):
-        b[r] = truth[r] - z[r]
         for c in range(n):
             M[r, c] = P[r, c]
-    error = b.copy()
+        M[r, n] = truth[r] - z[r]
     for k in range(n):
         pivot = k
         for r in range(k + 1, n):
             if abs(M[r, k]) > abs(M[pivot, k]):
                 pivot = r
         if pivot != k:
-            for c in range(n):
+            for c in range(n + 1):
                 M[k, c], M[pivot, c] = M[pivot, c], M[k, c]
-            b[k], b[pivot] = b[pivot], b[k]
         for r in range(k + 1, n):
             factor = M[r, k] / M[k, k]
-            for c in range(k, n):
+            for c in range(k, n + 1):
                 M[r, c] -= factor * M[k, c]
-            b[r] -= factor * b[k]
-    for r in range(n - 1, -1, -1):
-        acc = b[r]
+    nees = 0.0
+    for r in range(n - 1, -1, -1):                # back substitution: x_r = (P⁻¹ e)_r, in M[:, n]
+        acc = M[r, n]
         for c in range(r + 1, n):
-            acc -= M[r, c] * b[c]
-        b[r] = acc / M[r, r]
-    return float(error @ b)
+            acc -= M[r, c] * M[c, n]
+        M[r, n] = acc / M[r, r]
+        nees += (truth[r] - z[r]) * M[r, n]
+    return nees
 
 
 @njit(cache=True, nogil=True)
