@@ -111,8 +111,7 @@ def _pid_front(key: tuple) -> Designs:
     for derivative_time_s in FRONT_PID_DERIVATIVE_TIMES_S:
         at_slider_gain = pid(values["pid_gain"], integral_time_s,
                              derivative_time_s, ratio * derivative_time_s, T)
-        prefilter = setpoint_filter(integral_time_s, derivative_time_s,
-                                    ratio * derivative_time_s, T)
+        prefilter = _setpoint_filter(integral_time_s, derivative_time_s, ratio * derivative_time_s)
         for factor in FRONT_PID_GAIN_FACTORS:
             axis = common.with_changes(controller=factor * at_slider_gain,
                                        use_estimate=values["pid_feedback"] == "estimated")
@@ -124,6 +123,14 @@ def _pid_front(key: tuple) -> Designs:
                     current[:, analysis.LOOP_OUTPUTS.index("current_a")])))
             rows.append(row)
     return _designs(rows)
+
+
+@lru_cache(maxsize=64)
+def _setpoint_filter(integral_time_s: float, derivative_time_s: float, derivative_filter_s: float):
+    """The I-PD's reference filter (``controllers.pid.setpoint_filter``): it does not depend on the
+    PID gain, so a move of the gain slider reuses the sweep's seven (each a c2d through
+    python-control, a sixth of the PID front's time).  Shared: not to be modified."""
+    return setpoint_filter(integral_time_s, derivative_time_s, derivative_filter_s, T)
 
 
 def lqg_front(values: dict) -> Designs:
