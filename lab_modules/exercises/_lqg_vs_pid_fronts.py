@@ -115,9 +115,10 @@ def _pid_front(key: tuple) -> Designs:
         for factor in FRONT_PID_GAIN_FACTORS:
             axis = common.with_changes(controller=factor * at_slider_gain,
                                        use_estimate=values["pid_feedback"] == "estimated")
-            row = loop_figures(axis)
+            loop = axis.loop()                  # built once: the I-PD is this loop with the prefilter
+            row = loop_figures(axis, loop)
             if row["min_damping"] > 0:
-                ipd = analysis.with_reference_filter(axis.loop(), prefilter)
+                ipd = analysis.with_reference_filter(loop, prefilter)
                 current = analysis.step_response(ipd, "reference_m", round(LINEAR_WINDOW_S / T))
                 row["peak_current_ipd_a_per_m"] = float(np.max(np.abs(
                     current[:, analysis.LOOP_OUTPUTS.index("current_a")])))
