@@ -76,24 +76,57 @@ def process_noise(physics, B, Q):
 
 @njit(cache=True, nogil=True)
 def correct(z, P, y, var_sensor):
-    """Eq. 11-13 with H = (0, 0, 0, 1), P in Joseph form (exact for this H)."""
+    """Eq. 11-13 with H = (0, 0, 0, 1), P in Joseph form (exact for this H):
+
+        P⁺ = (I - K H) P (I - K H)ᵀ + K R Kᵀ,   K = P Hᵀ / (H P Hᵀ + R)
+
+    written out for this H, in place and without temporaries (the kernels call it four times a
+    sample): row r of W = (I - K H) P is P_r - K_r P_3 (for r = 3: (1 - K_3) P_3), and
+    P⁺_rc = W_rc - K_c W_r3 (for c = 3: (1 - K_3) W_r3) + R K_r K_c."""
     s = P[3, 3] + var_sensor
-    K = P[:, 3] / s
+    gains = (P[0, 3] / s, P[1, 3] / s, P[2, 3] / s, P[3, 3] / s)
     innovation = y - z[3]
     for r in range(N_STATES):
-        z[r] += K[r] * innovation
-    # Joseph: (I - K H) P (I - K H)ᵀ + K R Kᵀ
-    IKH = np.eye(N_STATES)
+        z[r] += gains[r] * innovation
+    last = 1.0 - gains[3]
+    for r in (0, 1, 2, 3):                          # row 3 last: the others read its old values
+        if r < 3:
+            w = (P[r, 0] - gains[r] * P[3, 0], P[r, 1] - gains[r] * P[3, 1],
+                 P[r, 2] - gains[r] * P[3, 2], P[r, 3] - gains[r] * P[3, 3])
+        else:
+            w = (last * P[3, 0], last * P[3, 1], last * P[3, 2], last * P[3, 3])
+        for c in range(3):
+            P[r, c] = w[c] - gains[c] * w[3] + var_sensor * gains[r] * gains[c]
+        P[r, 3] = last * w[3] + var_sensor * gains[r] * gains[3]
+
+
+@njit(cache=True, nogil=True)
+def row_times(A, P, r):
+    """Row r of A P (4×4), summed left to right."""
+    return (A[r, 0] * P[0, 0] + A[r, 1] * P[1, 0] + A[r, 2] * P[2, 0] + A[r, 3] * P[3, 0],
+            A[r, 0] * P[0, 1] + A[r, 1] * P[1, 1] + A[r, 2] * P[2, 1] + A[r, 3] * P[3, 1],
+            A[r, 0] * P[0, 2] + A[r, 1] * P[1, 2] + A[r, 2] * P[2, 2] + A[r, 3] * P[3, 2],
+            A[r, 0] * P[0, 3] + A[r, 1] * P[1, 3] + A[r, 2] * P[2, 3] + A[r, 3] * P[3, 3])
+
+
+@njit(cache=True, nogil=True)
+def propagate_covariance(P, A, Q):
+    """P ← A P Aᵀ + Q (eq. 10), in place; A P held in locals (no temporaries: the kernels call
+    this four times a sample, and a 4×4 through BLAS costs more than its 128 products)."""
+    AP = (row_times(A, P, 0), row_times(A, P, 1), row_times(A, P, 2), row_times(A, P, 3))
     for r in range(N_STATES):
-        IKH[r, 3] -= K[r]
-    P[:, :] = IKH @ P @ IKH.T + var_sensor * np.outer(K, K)
+        w = AP[r]
+        for c in range(N_STATES):
+            P[r, c] = w[0] * A[c, 0] + w[1] * A[c, 1] + w[2] * A[c, 2] + w[3] * A[c, 3] + Q[r, c]
 
 
 @njit(cache=True, nogil=True)
 def predict_linear(z, P, A, B, Q, current_a):
     """Eq. 9-10."""
-    z[:] = A @ z + B[:, 0] * current_a + B[:, 1]
-    P[:, :] = A @ P @ A.T + Q
+    x, v, f, xm = z[0], z[1], z[2], z[3]
+    for r in range(N_STATES):
+        z[r] = A[r, 0] * x + A[r, 1] * v + A[r, 2] * f + A[r, 3] * xm + B[r, 0] * current_a + B[r, 1]
+    propagate_covariance(P, A, Q)
 
 
 @njit(cache=True, nogil=True)
@@ -113,7 +146,7 @@ def predict_exact_force(z, P, physics, current_a, A, B, Q):
     z[1] = v + T * accel
     z[2] = f
     z[3] = a * xm + physics[SENSOR_GAIN] * (1.0 - a) * x
-    P[:, :] = A @ P @ A.T + Q
+    propagate_covariance(P, A, Q)
 
 
 class AxialKalmanFilter:

@@ -111,19 +111,27 @@ def _pid_front(key: tuple) -> Designs:
     for derivative_time_s in FRONT_PID_DERIVATIVE_TIMES_S:
         at_slider_gain = pid(values["pid_gain"], integral_time_s,
                              derivative_time_s, ratio * derivative_time_s, T)
-        prefilter = setpoint_filter(integral_time_s, derivative_time_s,
-                                    ratio * derivative_time_s, T)
+        prefilter = _setpoint_filter(integral_time_s, derivative_time_s, ratio * derivative_time_s)
         for factor in FRONT_PID_GAIN_FACTORS:
             axis = common.with_changes(controller=factor * at_slider_gain,
                                        use_estimate=values["pid_feedback"] == "estimated")
-            row = loop_figures(axis)
+            loop = axis.loop()                  # built once: the I-PD is this loop with the prefilter
+            row = loop_figures(axis, loop)
             if row["min_damping"] > 0:
-                ipd = analysis.with_reference_filter(axis.loop(), prefilter)
+                ipd = analysis.with_reference_filter(loop, prefilter)
                 current = analysis.step_response(ipd, "reference_m", round(LINEAR_WINDOW_S / T))
                 row["peak_current_ipd_a_per_m"] = float(np.max(np.abs(
                     current[:, analysis.LOOP_OUTPUTS.index("current_a")])))
             rows.append(row)
     return _designs(rows)
+
+
+@lru_cache(maxsize=64)
+def _setpoint_filter(integral_time_s: float, derivative_time_s: float, derivative_filter_s: float):
+    """The I-PD's reference filter (``controllers.pid.setpoint_filter``): it does not depend on the
+    PID gain, so a move of the gain slider reuses the sweep's seven (each a c2d through
+    python-control, a sixth of the PID front's time).  Shared: not to be modified."""
+    return setpoint_filter(integral_time_s, derivative_time_s, derivative_filter_s, T)
 
 
 def lqg_front(values: dict) -> Designs:

@@ -168,12 +168,8 @@ class AdaptiveFilterSimulation:
     def advance(self, n_steps: int) -> np.ndarray:
         trace, drifting = self.loop.advance(n_steps), self.drift.advance(n_steps)
         n = min(trace.shape[0], drifting.shape[0])
-        trace = trace[:n]
-        errors = []
-        for f in FILTERS:
-            errors.append(column(trace, f"{f}_x_m") - column(trace, "x_true_m"))
-            errors.append(column(trace, f"{f}_force_n") - column(trace, "disturbance_n"))
-        return np.column_stack([trace, *errors, drifting[:n, 1:]]) if n else np.empty((0, 1 + len(self.columns)))
+        return np.column_stack([with_errors(trace[:n]), drifting[:n, 1:]]) if n \
+            else np.empty((0, 1 + len(self.columns)))
 
     def filter_state(self) -> dict | None:
         return self.loop.filter_state()
@@ -186,9 +182,20 @@ class AdaptiveFilterSimulation:
         return self.loop.status_message() or self.drift.status_message()
 
 
+def with_errors(trace: np.ndarray) -> np.ndarray:
+    """The loop's rows with each filter's estimation errors x̂ - x and F̂_St - F_St (``ERROR_COLUMNS``)."""
+    errors = []
+    for f in FILTERS:
+        errors.append(column(trace, f"{f}_x_m") - column(trace, "x_true_m"))
+        errors.append(column(trace, f"{f}_force_n") - column(trace, "disturbance_n"))
+    return np.column_stack([trace, *errors])
+
+
 def run(values: dict, duration_s: float = PERIOD_S) -> tuple[np.ndarray, str]:
-    simulation = AdaptiveFilterSimulation(values)
-    return simulation.advance(round(duration_s / T)), simulation.status_message()
+    """The two-point scenario: the columns of ``AdaptiveFilterSimulation`` up to the errors (the
+    drift run beside it has seeds of its own, ``drift_results``), and the run's status."""
+    loop = LoopSimulation(setup(values), seed=int(values["seed"]))
+    return with_errors(loop.advance(round(duration_s / T))), loop.status_message()
 
 
 STEADY_RUN_S, STEADY_SKIP_S = 1.0, 0.05

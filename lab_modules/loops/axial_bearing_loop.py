@@ -242,7 +242,10 @@ def run(n_steps, state, physics, schedule, pid, filters, identification, noise, 
     physics : ``scheduled_kalman.physics_vector`` of the filters' model (indices ``MASS`` ...);
     schedule : ``Schedule``; pid : ``AxialPID``; filters : ``FilterBank`` (in place);
     identification : ``Identification``;
-    noise : (n_steps, 4) draws: sensor [V], current [A], measured force [N], force random walk [N]."""
+    noise : (n_steps, 4) draws: sensor [V], current [A], measured force [N], force random walk [N].
+
+    The filters' steps are ``scheduled_kalman``'s written-out 4×4 kernels (no BLAS calls, no
+    temporaries): a sample costs about 1 µs."""
     # every field read once, before the loop: an array read out of a bundle inside the loop
     # would cost a reference count per sample
     segments, period, load_ramp = schedule.segments, schedule.period_s, schedule.load_ramp_s

@@ -63,6 +63,7 @@ from lab_modules.estimators.scheduled_kalman import (
     predict_exact_force,
     predict_linear,
     process_noise,
+    propagate_covariance,
 )
 from lab_modules.loops.axial_bearing_loop import (
     SAMPLE_TIME_S,
@@ -153,7 +154,7 @@ def predict_scheduled(z, P, k_i, k_s, tangent_k_i, tangent_k_s, jacobian, physic
     z[:] = A @ z + B[:, 0] * current + B[:, 1]
     model_matrices(tangent_k_i, tangent_k_s, physics, A, B)
     process_noise(physics, B, Q)
-    P[:, :] = A @ P @ A.T + Q
+    propagate_covariance(P, A, Q)
 
 
 NEES_STATES = 3              # x, v, F_St: the sensor state x_M is left out (module docstring)
@@ -162,9 +163,34 @@ NEES_STATES = 3              # x, v, F_St: the sensor state x_M is left out (mod
 @njit(cache=True, nogil=True)
 def normalised_errors(z, P, truth):
     """NEES eᵀ P⁻¹ e of the a-posteriori estimate ``z`` against ``truth`` over the first ``NEES_STATES``
-    states (x, v, F_St) with their block of P [-]."""
-    error = truth[:NEES_STATES] - z[:NEES_STATES]
-    return float(error @ np.linalg.solve(P[:NEES_STATES, :NEES_STATES].copy(), error))
+    states (x, v, F_St) with their block of P [-]: P⁻¹ e by Gaussian elimination with partial
+    pivoting (as LAPACK's solver; on a 3×3 the call itself would cost more than the sum)."""
+    n = NEES_STATES
+    M = np.empty((n, n + 1))                      # [P block | e], reduced in place
+    for r in range(n):
+        for c in range(n):
+            M[r, c] = P[r, c]
+        M[r, n] = truth[r] - z[r]
+    for k in range(n):
+        pivot = k
+        for r in range(k + 1, n):
+            if abs(M[r, k]) > abs(M[pivot, k]):
+                pivot = r
+        if pivot != k:
+            for c in range(n + 1):
+                M[k, c], M[pivot, c] = M[pivot, c], M[k, c]
+        for r in range(k + 1, n):
+            factor = M[r, k] / M[k, k]
+            for c in range(k, n + 1):
+                M[r, c] -= factor * M[k, c]
+    nees = 0.0
+    for r in range(n - 1, -1, -1):                # back substitution: x_r = (P⁻¹ e)_r, in M[:, n]
+        acc = M[r, n]
+        for c in range(r + 1, n):
+            acc -= M[r, c] * M[c, n]
+        M[r, n] = acc / M[r, r]
+        nees += (truth[r] - z[r]) * M[r, n]
+    return nees
 
 
 @njit(cache=True, nogil=True)

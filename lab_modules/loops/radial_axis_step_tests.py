@@ -151,10 +151,11 @@ def linear_figures(loop: analysis.Loop) -> dict[str, float]:
             "min_damping": damping}
 
 
-def loop_figures(axis: AxisSetup) -> dict[str, float]:
+def loop_figures(axis: AxisSetup, loop: analysis.Loop | None = None) -> dict[str, float]:
     """``linear_figures`` of one set-up plus its noise-driven RMS coil current [A]
-    and rotor displacement [m] (Lyapunov, ``analysis.noise_rms``)."""
-    loop = axis.loop()
+    and rotor displacement [m] (Lyapunov, ``analysis.noise_rms``); ``loop``: the set-up's
+    ``axis.loop()`` if the caller has built it already."""
+    loop = axis.loop() if loop is None else loop
     figures = linear_figures(loop)
     rms = analysis.noise_rms(loop, axis.noise_variances)
     return {**figures, "noise_rms_current_a": float(rms["current_a"]), "noise_rms_x_m": float(rms["x_m"])}
