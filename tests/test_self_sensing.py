@@ -16,15 +16,27 @@ from scipy import stats
 from lab_modules.estimators.ripple_inductance import fit, predicted_sigma_inductance_h, weights
 from lab_modules.exercises._self_sensing_geometry import analysis as geometry_analysis
 from lab_modules.exercises._self_sensing_geometry import straight_ramp_sigma_gap_m
+from lab_modules.exercises._self_sensing_levitation import loop_control, spread_run
 from lab_modules.exercises.self_sensing import (
     EXERCISE,
+    LEVITATED,
     QUIET,
     SelfSensingSimulation,
     setup,
     stationary,
     statistics,
 )
-from lab_modules.loops.self_sensing_loop import COLUMN, SelfSensingLoop, SelfSensingSetup
+from lab_modules.loops.self_sensing_levitation import (
+    linear_loop,
+    predicted_gap_spread_m,
+    spread_relative_error,
+)
+from lab_modules.loops.self_sensing_loop import (
+    COLUMN,
+    SelfSensingLoop,
+    SelfSensingSetup,
+    duty_for_mean_current,
+)
 from lab_modules.plants.self_sensing_ball import MU0, RIG
 
 REPO = Path(__file__).resolve().parents[1]
@@ -273,3 +285,54 @@ def test_offset_shift_during_moves_follows_eq_25_and_vanishes_without_offset():
     assert metrics["shift_to_eq25"] == pytest.approx(1.0, abs=0.05)
     assert metrics["shift_max_uh"] > metrics["shift_at_rest_max_uh"]          # the moves make īᴵᴵ ≠ īᴵ
     assert "offset" not in EXERCISE.metrics(EXERCISE.resolve(QUIET), 0.3)["trajectory"]
+
+
+# -- levitation on ŝ: the linear loop's predictions ----------------------------------------------------
+def levitated_values(**overrides) -> dict:
+    return EXERCISE.resolve({**LEVITATED, **overrides})
+
+
+def test_spread_and_its_statistical_error_match_a_monte_carlo_of_the_linear_loop():
+    values = levitated_values()
+    s = setup(values)
+    loop = linear_loop(s, loop_control(values), s.gap_1_m)
+    sigma, n_periods, runs, burn_in = 10e-6, 4000, 400, 600
+    rng = np.random.default_rng(3)
+    state = np.zeros((7, runs))
+    gaps = np.empty((n_periods, runs))
+    for k in range(burn_in + n_periods):
+        state = loop.closed @ state + np.outer(loop.noise_input, sigma * rng.standard_normal(runs))
+        if k >= burn_in:
+            gaps[k - burn_in] = state[0]
+    ratios = gaps.std(axis=0) / predicted_gap_spread_m(loop, sigma)
+    assert abs(ratios.mean() - 1.0) < 0.01                          # Lyapunov: mean std, ±0.2 % sampling
+    assert ratios.std() / spread_relative_error(loop, n_periods) == pytest.approx(1.0, abs=0.15)   # Bartlett
+
+
+def test_duty_and_gap_spread_follow_the_linear_loop_while_the_duty_stays_clear_of_its_limits():
+    values = levitated_values(sigma_current_ma=0.5, sigma_voltage_mv=7.5)
+    s, control_ = setup(values), loop_control(values)
+    run = spread_run(s, control_, linear_loop(s, control_, s.gap_1_m), 0, 5.0)
+    assert run["duty_at_limit_percent"] == 0.0
+    assert run["duty_std_to_predicted"] == pytest.approx(1.0, abs=0.03)
+    assert run["gap_std_to_predicted"] == pytest.approx(1.0, abs=0.12)   # one run's std: ±3.9 %
+
+
+def test_duty_rule_linearised_by_the_loop_matches_its_own_finite_step():
+    values = levitated_values()
+    s, control_ = setup(values), loop_control(values)
+    loop = linear_loop(s, control_, s.gap_1_m)
+    current = float(RIG.equilibrium_current_a(s.gap_1_m))
+    inductance_h = float(RIG.inductance_h(s.gap_1_m))
+    step = 0.02                                                     # a 20 mA command step, the start held
+
+    def duty(target_a: float) -> float:
+        return duty_for_mean_current(current, inductance_h, target_a, inductance_h, RIG.coil_resistance_ohm,
+                                     s.battery_voltage_v, s.period_s)
+    state = np.zeros(7)
+    state[3] = step                                                 # the integral term alone moves i* by 20 mA
+    assert duty(current + step) - duty(current) == pytest.approx(loop.duty_row @ state, rel=1e-3)
+    state[3], state[6] = 0.0, step                                  # the period starts 20 mA higher
+    assert duty_for_mean_current(current + step, inductance_h, current, inductance_h, RIG.coil_resistance_ohm,
+                                 s.battery_voltage_v, s.period_s) - duty(current) == pytest.approx(
+        loop.duty_row @ state, rel=1e-3)

@@ -499,7 +499,9 @@ FIXED_4 = {**QUIET, "trajectory": TRAJECTORIES[1]}
 
 
 LEVITATED = {"feedback": levitation.FEEDBACK[1], "trajectory": TRAJECTORIES[1]}
-LEVITATION_RUN_S = 5.0         # about 60 closed-loop time constants: the spread measured to a few per cent
+#: Half the sensor noise: the duty stays clear of its limits and the loop on ŝ is linear.
+HALF_NOISE_LEVITATED = {**LEVITATED, "sigma_current_ma": 0.5, "sigma_voltage_mv": 7.5}
+LEVITATION_RUN_S = 5.0         # one run's true-gap std to ±3.9 % (the closed loop's autocorrelation, Bartlett)
 
 
 def _within(value: float, relative: float) -> tuple[float, float]:
@@ -622,16 +624,31 @@ EXERCISE.claims = (
           "the trade-off plots use the straight-ramp formula", settings={"gap_area_cm2": 0.35}),
     Claim("lab target (paper 001's sensorless bearing, loop closed on ŝ)", "ball held at 4 mm on ŝ alone, "
           "f_c = 6 Hz, σ(i) = 1 mA, σ(v) = 15 mV", "not given (the paper estimates, it does not levitate)",
-          "levitation.held_s", (LEVITATION_RUN_S - 0.01, None), "s",
-          "the whole run without leaving the reference by 1 mm", settings=LEVITATED, duration_s=LEVITATION_RUN_S),
-    Claim("lab target (loop on ŝ)", "true-gap std / prediction from the estimate's spread through the linear loop",
-          "not given", "levitation.gap_std_to_predicted", (0.8, 1.2), "",
-          "discrete Lyapunov equation of the loop linearised at 4 mm, fed the measured std of ŝ − s as white "
-          "noise; the first 0.1 s left out", settings=LEVITATED, duration_s=LEVITATION_RUN_S),
-    Claim("lab target (loop on ŝ)", "true-gap std / prediction from the estimator's own σ̂(ŝ) (eq. 32)",
-          "not given", "levitation.gap_std_to_eq32_prediction", (0.8, 1.35), "",
-          "wider than the row above: in the loop the spread of ŝ − s exceeds the mean σ̂(ŝ) by about 7 % (the "
-          "current and the ball change inside a period)", settings=LEVITATED, duration_s=LEVITATION_RUN_S),
+          "levitation.held_s_least", (LEVITATION_RUN_S - 0.01, None), "s",
+          "the whole run without leaving the reference by 1 mm, each of 8 seeds", settings=LEVITATED,
+          duration_s=LEVITATION_RUN_S),
+    Claim("lab target (loop on ŝ)", "true-gap std / prediction from the estimate's spread through the linear loop, "
+          "mean of 8 seeds", "lab target: within 20 %", "levitation.gap_std_to_predicted_mean", (1.09, 1.27), "",
+          "18 % above the prediction: the noise drives the duty to its limit 0.8 (each phase ≥ 20 % of T), which "
+          "the linear loop lacks; its σ(χ) = 0.073 puts the limit 2.3σ above χ_eq = 0.63, the duty sits there in "
+          "0.8 % of periods and each clipped period leaves the current short, always the same way. Band: ±5 "
+          "standard errors (0.017) of the mean", deviation=True, settings=LEVITATED, duration_s=LEVITATION_RUN_S),
+    Claim("lab target (loop on ŝ)", "duty std / the linear loop's prediction from the estimate's spread, mean of 8 "
+          "seeds", "not given", "levitation.duty_std_to_predicted_mean", (0.95, 1.05), "",
+          "the duty's swing that reaches the limit is the linear loop's own", settings=LEVITATED,
+          duration_s=LEVITATION_RUN_S),
+    Claim("lab target (loop on ŝ)", "true-gap std / prediction, σ(i) = 0.5 mA, σ(v) = 7.5 mV, mean of 8 seeds",
+          "lab target: within 20 %", "levitation.gap_std_to_predicted_mean", (0.94, 1.06), "",
+          "the duty stays 5σ clear of its limit: the linear prediction holds; band ±4 standard errors of the mean "
+          "(one 4.9 s run's std: ±3.9 % from the loop's autocorrelation)", settings=HALF_NOISE_LEVITATED,
+          duration_s=LEVITATION_RUN_S),
+    Claim("lab target (loop on ŝ)", "share of periods with the duty at its limit, σ(i) = 0.5 mA, σ(v) = 7.5 mV",
+          "not given", "levitation.duty_at_limit_percent_mean", (0.0, 0.01), "%", "8 seeds",
+          settings=HALF_NOISE_LEVITATED, duration_s=LEVITATION_RUN_S),
+    Claim("lab target (loop on ŝ)", "true-gap std / prediction from the estimator's own σ̂(ŝ) (eq. 32), mean of 8 "
+          "seeds", "not given", "levitation.gap_std_to_eq32_prediction_mean", (0.8, 1.35), "",
+          "wider than the rows above: in the loop the spread of ŝ − s exceeds the mean σ̂(ŝ) by about 4 % (σ̂ grows "
+          "with the duty), besides the duty's limit", settings=LEVITATED, duration_s=LEVITATION_RUN_S),
     Claim("lab target (loop on ŝ)", "largest f_c a noise-free run holds / the analysis's stability limit",
           "not given (lab: limit 23.2 Hz at 4 mm)", "levitation.nonlinear_limit_to_predicted", (0.9, 1.1), "",
           "bisection of 1 s runs between 0.8 and 1.2 × the limit; the limit from the loop with ŝ one period "

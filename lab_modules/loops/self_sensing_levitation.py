@@ -20,7 +20,9 @@ sample's start).
 ``linear_loop`` is the analysis: the plant linearised at the reference, discretised with
 the period's mean current held over the period, the measurement the mean gap over the
 period (the averaging) and one period of delay; from it the margins at the plant input,
-the stable range of ω_c and the true-position spread that σ(ŝ) causes.
+the stable range of ω_c, the true-position spread that σ(ŝ) causes, the duty's spread (the
+loop is linear only while the duty stays clear of its limits) and the statistical error of a
+spread measured over a finite run.
 """
 
 from __future__ import annotations
@@ -47,6 +49,8 @@ from lab_modules.loops.self_sensing_loop import (
 from lab_modules.plants.self_sensing_ball import GRAVITY, inductance, inductance_slope
 
 CURVATURE_STEP_M = 1e-7          # central difference of ∂L/∂s for ∂²L/∂s²
+DUTY_SLOPE_STEP_A = 1e-3         # central difference of the duty rule's slopes [A]
+AUTOCORRELATION_FLOOR = 1e-9     # the closed loop's autocorrelation counts until its envelope falls below this
 #: The loop state carried between runs, in ``run_levitated``'s order (SI units).
 STATE = ("flux_wb", "gap_m", "velocity_m_s", "integral_a", "derivative_a", "previous_error_m",
          "inductance_estimate_h", "gap_estimate_m", "current_measured_a")
@@ -80,6 +84,13 @@ def levitation_gains(gap_m, constants, mass_kg, bandwidth_rad_s):
     kp = (negative_stiffness + 3.0 * mass_kg * bandwidth_rad_s**2) / force_per_current
     ki = mass_kg * bandwidth_rad_s**3 / force_per_current
     return kp, ki, kd, current
+
+
+@njit(cache=True, nogil=True)
+def shortest_phase_samples(samples_per_period, trim_samples, shortest_phase):
+    """The fewest samples either phase keeps [-]: the share ``shortest_phase`` of the period, and
+    never fewer than a trimmed window needs; the duty stays inside [this, n − this] / n."""
+    return max(2 * trim_samples + 3, int(shortest_phase * samples_per_period))
 
 
 @njit(cache=True, nogil=True)
@@ -119,7 +130,7 @@ def run_levitated(first_period, n_periods, state, constants, setup, control, rng
     fit_2 = np.empty(7)
     noise = np.empty(2 * n + 2)
     true_i = np.empty(n)
-    min_on = max(2 * trim + 3, int(control.shortest_phase * n))
+    min_on = shortest_phase_samples(n, trim, control.shortest_phase)
     done = n_periods
     for p in range(n_periods):
         t0 = (first_period + p) * period_s
@@ -191,6 +202,8 @@ class LinearLoop(NamedTuple):
     closed: np.ndarray                # the closed loop's state matrix
     noise_input: np.ndarray           # where σ(ŝ) enters: the delayed estimate (unit column)
     period_s: float                   # T_pwm: one step of the loop [s]
+    duty: float                       # χ_eq: the duty at the equilibrium [-]
+    duty_row: np.ndarray              # δχ = duty_row · state: the duty rule linearised [1 per state unit]
 
 
 def linear_loop(setup: SelfSensingSetup, control_: LevitationControl, gap_m: float) -> LinearLoop:
@@ -205,7 +218,8 @@ def linear_loop(setup: SelfSensingSetup, control_: LevitationControl, gap_m: flo
     kp, ki, kd, current = levitation_gains(gap_m, constants, m, control_.bandwidth_rad_s)
     _, force_per_current, negative_stiffness = linearisation(gap_m, constants, m)
     period = setup.period_s
-    duty = 0.5 * (1.0 + rig.coil_resistance_ohm * current / (setup.battery_voltage_v or rig.battery_voltage_v))
+    v_bat = setup.battery_voltage_v or rig.battery_voltage_v
+    duty = 0.5 * (1.0 + rig.coil_resistance_ohm * current / v_bat)
     # (s, ṡ, q = ∫s) under a held current: ṡ = v, v̇ = (k_s s − f_i i)/m, q̇ = s
     block = np.zeros((4, 4))
     block[0, 1], block[1, 0], block[1, 3], block[2, 0] = 1.0, negative_stiffness / m, -force_per_current / m, 1.0
@@ -228,7 +242,17 @@ def linear_loop(setup: SelfSensingSetup, control_: LevitationControl, gap_m: flo
     open_loop = control.ss(plant, u_column[:, None], -u_row[None, :], 0.0, period)   # L = −(i* per i*)
     noise = np.zeros(7)
     noise[2] = 1.0
-    return LinearLoop(open_loop, plant + np.outer(u_column, u_row), noise, period)
+    # δχ = ∂χ/∂i* δi*ₚ + ∂χ/∂i₀ δi*ₚ₋₁: the duty rule's slopes (central differences, exact for its
+    # quadratic dependence), the period starting at the last command's level
+    inductance_h = float(rig.inductance_h(gap_m))
+    def duty_at(start_a: float, target_a: float) -> float:
+        return duty_for_mean_current(start_a, inductance_h, target_a, inductance_h, rig.coil_resistance_ohm, v_bat,
+                                     period)
+    step = DUTY_SLOPE_STEP_A
+    per_command = (duty_at(current, current + step) - duty_at(current, current - step)) / (2 * step)
+    per_start = (duty_at(current + step, current) - duty_at(current - step, current)) / (2 * step)
+    duty_row = per_command * u_row + per_start * np.eye(7)[6]
+    return LinearLoop(open_loop, plant + np.outer(u_column, u_row), noise, period, duty, duty_row)
 
 
 def spectral_radius(loop: LinearLoop) -> float:
@@ -236,14 +260,41 @@ def spectral_radius(loop: LinearLoop) -> float:
     return float(np.max(np.abs(np.linalg.eigvals(loop.closed))))
 
 
-def predicted_gap_spread_m(loop: LinearLoop, sigma_estimate_m: float) -> float:
-    """Std of the true gap [m] when the fed-back ŝ carries white noise σ(ŝ) per period
-    (X = A X Aᵀ + σ² g gᵀ, the discrete Lyapunov equation); NaN for an unstable loop."""
+def stationary_covariance(loop: LinearLoop, sigma_estimate_m: float) -> np.ndarray | None:
+    """The closed loop's state covariance when the fed-back ŝ carries white noise σ(ŝ) [m] per
+    period, X = A X Aᵀ + σ² g gᵀ (the discrete Lyapunov equation); None for an unstable loop."""
     if spectral_radius(loop) >= 1.0:
+        return None
+    return scipy.linalg.solve_discrete_lyapunov(loop.closed, sigma_estimate_m**2 * np.outer(loop.noise_input,
+                                                                                         loop.noise_input))
+
+
+def predicted_gap_spread_m(loop: LinearLoop, sigma_estimate_m: float) -> float:
+    """Std of the true gap [m], √X₀₀ of ``stationary_covariance``; NaN for an unstable loop."""
+    x = stationary_covariance(loop, sigma_estimate_m)
+    return float("nan") if x is None else float(np.sqrt(x[0, 0]))
+
+
+def predicted_duty_spread(loop: LinearLoop, sigma_estimate_m: float) -> float:
+    """Std of the duty χ [-] that σ(ŝ) causes, √(c X cᵀ) with c = ``duty_row``; NaN if unstable.
+    The loop is linear only while χ stays clear of its limits (``shortest_phase_samples``)."""
+    x = stationary_covariance(loop, sigma_estimate_m)
+    return float("nan") if x is None else float(np.sqrt(loop.duty_row @ x @ loop.duty_row))
+
+
+def spread_relative_error(loop: LinearLoop, n_periods: int) -> float:
+    """Relative standard error of the true gap's std measured over ``n_periods`` periods [-]:
+    √(Σₖ ρₖ² / (2 N)) for a Gaussian stationary process (Bartlett), ρₖ = (Aᵏ X)₀₀ / X₀₀ the
+    closed loop's autocorrelation at lag k, summed over k = −∞ … ∞ until it has decayed."""
+    x = stationary_covariance(loop, 1.0)
+    if x is None:
         return float("nan")
-    x = scipy.linalg.solve_discrete_lyapunov(loop.closed, sigma_estimate_m**2 * np.outer(loop.noise_input,
-                                                                                      loop.noise_input))
-    return float(np.sqrt(x[0, 0]))
+    lags = int(np.ceil(np.log(AUTOCORRELATION_FLOOR) / np.log(spectral_radius(loop))))
+    column, squares = x[:, 0], 0.0
+    for _ in range(lags):
+        column = loop.closed @ column                           # (Aᵏ X) e₀
+        squares += (column[0] / x[0, 0]) ** 2
+    return float(np.sqrt((1.0 + 2.0 * squares) / (2.0 * n_periods)))
 
 
 def stable_bandwidths_rad_s(setup: SelfSensingSetup, control_: LevitationControl, gap_m: float
