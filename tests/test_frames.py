@@ -32,6 +32,23 @@ def test_compiled_rows_are_the_reference_rows(first, n, columns):
     assert np.array_equal(got, expected)
 
 
+def test_compiled_rows_on_the_scope_window_are_the_reference_rows():
+    """The tab's buffer is a view of ``scope.ScopeWindow``'s column-major array, frame after frame,
+    while the window fills and once it is full (each bucket size and alignment in turn), with
+    equal values (a flat stretch) where the first of them must win."""
+    source = _buffer(3_217, 6_000, seed=4)
+    source[2_000:2_400, 1] = 0.5
+    window = scope.ScopeWindow()
+    buffer = np.empty((0, source.shape[1]))
+    for start in range(0, len(source), 97):
+        buffer = window.append(buffer, source[start:start + 97], 1_500)
+        assert not buffer.flags.c_contiguous
+        for columns in ([1], [2, 1], [4, 2]):
+            expected = _scope_rows(np.ascontiguousarray(buffer), columns, T)
+            got = scope_charts.scope_rows(buffer, np.array(columns, dtype=np.int64), T, SCOPE_BUCKETS, ROUGHNESS_ROWS)
+            assert np.array_equal(got, expected), (start, columns)
+
+
 @pytest.mark.parametrize("first, window_ms", [(40_000, 50.0), (40_000, 60.0)])   # full window, window filling
 def test_compiled_chart_frame_is_the_reference_frame(first, window_ms):
     buffer = _buffer(first)

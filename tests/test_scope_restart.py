@@ -47,3 +47,30 @@ def test_scope_buffer_after_a_slider_move_and_a_reset(name):
         assert np.all(np.diff(buffer[:, 0]) > 0), name
         if trace[0, 0] <= before:                     # a new run: the buffer holds it alone
             assert np.array_equal(buffer, trace, equal_nan=True)
+
+
+def test_the_scope_window_holds_the_rows_of_append_and_never_changes_a_view_it_handed_out():
+    """``scope.ScopeWindow`` against its twin ``scope.append``: frames of varied length, a window
+    that shrinks and grows (the time scale), new runs, an empty frame and a buffer emptied from
+    outside (a reset); every view handed out keeps its rows while later frames are written."""
+    rng = np.random.default_rng(3)
+    window = scope.ScopeWindow()
+    shown = expected = np.empty((0, 3))
+    handed_out, backings = [], set()
+    t = 0
+    for frame in range(400):
+        rows = 50 if frame < 150 else (20 if frame < 250 else 90)
+        n = int(rng.integers(0, 12))
+        if frame % 97 == 96:
+            t = 0                                     # a new run starts at time 0
+        trace = np.column_stack([np.arange(t, t + n) * 1e-3, rng.standard_normal((n, 2))])
+        t += n
+        if frame % 131 == 130:
+            shown = expected = shown[:0]              # emptied from outside
+        shown = window.append(shown, trace, rows)
+        expected = scope.append(expected, trace, rows)
+        assert np.array_equal(shown, expected), frame
+        handed_out.append((shown, shown.copy()))
+        backings.add(id(window.backing))
+    assert all(np.array_equal(view, rows) for view, rows in handed_out)
+    assert len(backings) < 100, "most frames are written in place, not copied with their window"

@@ -12,7 +12,14 @@ import numpy as np
 import pytest
 
 from lab_modules.estimators.adaline import siso_step
-from lab_modules.estimators.fuzzy_basis_network import CENTRES, FuzzyBasisNetwork, evaluate
+from lab_modules.estimators.fuzzy_basis_network import (
+    CENTRES,
+    FuzzyBasisNetwork,
+    evaluate,
+    grid_distances,
+    test_grid,
+    training_grid,
+)
 from lab_modules.estimators.stiffness_identification import lsm_factors, lsm_factors_at
 from lab_modules.exercises.stiffness_map import EXERCISE
 from lab_modules.plants.axial_bearing import AXIAL, TABLE_4_KI_N_PER_A, TABLE_5_KS_N_PER_MM
@@ -131,3 +138,23 @@ def test_cli_bad_input_exits_2_with_one_line(setting, tokens):
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1
     assert all(token in lines[0] for token in tokens), lines[0]
+
+
+def test_the_live_view_on_its_fixed_grids_computes_what_the_network_computes_from_the_inputs():
+    """The live view trains and tests on distances computed once per grid (``grid_distances``):
+    the same numbers, digit for digit, as from the operating points every time."""
+    rng = np.random.default_rng(5)
+    tables = TABLE_4_KI_N_PER_A, TABLE_5_KS_N_PER_MM
+    for table, n in zip(tables, (41, 20)):
+        currents, positions = test_grid(n)
+        target = rng.normal(table.mean(), table.std(), currents.size)
+        net = FuzzyBasisNetwork.from_table(table, 0.3)
+        assert net.rmse_at(grid_distances(n), target) == net.rmse(currents, positions, target)
+        assert np.array_equal(net.predict_at(grid_distances(n)), net.predict(currents, positions))
+    currents, positions = training_grid()
+    target = rng.normal(20.0, 2.0, currents.size)
+    by_points, by_distances = (FuzzyBasisNetwork.from_table(TABLE_4_KI_N_PER_A) for _ in range(2))
+    assert by_points.train(currents, positions, target, 3, 0.1) == by_distances.train_at(grid_distances(20), target,
+                                                                                         3, 0.1)
+    assert np.array_equal(by_points.widths, by_distances.widths)
+    assert not grid_distances(20).flags.writeable

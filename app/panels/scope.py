@@ -196,6 +196,52 @@ def append(buffer: np.ndarray, trace: np.ndarray, rows: int) -> np.ndarray:
     return np.concatenate([buffer, trace])[-rows:]
 
 
+class ScopeWindow:
+    """The storage behind a tab's scope buffer: ``append`` gives the same rows as the function
+    ``append`` (its obvious twin), without copying the whole window every frame.
+
+    The rows live in a column-major backing array with spare rows after the newest: a frame
+    writes its new samples into the spare rows and hands out a view of the newest ``rows``; only
+    when the spare rows run out are the newest rows copied to a fresh backing array (on average
+    ``1 / SPARE`` of a window per window of new samples, instead of a whole window per frame).
+    The rows a view covers are never written again (a writer only fills rows beyond the newest
+    handed out, and a fresh backing array leaves the old one untouched), so a reader may keep a
+    view without the lock.  Column by column in memory, the scope's per-chart scans
+    (``app.panels.scope_charts``) read one contiguous column instead of one value per row."""
+
+    SPARE = 0.5                   # spare rows, as a share of the window
+
+    def __init__(self) -> None:
+        self.backing: np.ndarray | None = None
+        self.end = 0                              # rows of ``backing`` written (and at most handed out)
+        self.shown: np.ndarray | None = None      # the view handed out last
+
+    def append(self, buffer: np.ndarray, trace: np.ndarray, rows: int) -> np.ndarray:
+        """``append(buffer, trace, rows)``; in place when ``buffer`` is the view this window handed
+        out last (any other buffer, e.g. emptied by a reset, starts a fresh backing array)."""
+        if not len(trace):                        # nothing new: the newest rows, still this window's
+            view = buffer[len(buffer) - min(len(buffer), rows):]
+            if buffer is self.shown:
+                self.shown = view
+            return view
+        if len(buffer) and trace[0, 0] <= buffer[-1, 0]:
+            buffer = buffer[:0]                   # a new run (see ``append``)
+        keep = min(len(buffer) + len(trace), rows)
+        backing = self.backing
+        if (buffer is not self.shown or backing is None or backing.shape[1] != trace.shape[1]
+                or self.end + len(trace) > len(backing)):
+            kept = buffer[len(buffer) - (keep - min(len(trace), keep)):]
+            backing = np.empty((keep + max(int(self.SPARE * rows), len(trace)), trace.shape[1]),
+                               dtype=np.result_type(buffer, trace), order="F")
+            backing[:len(kept)] = kept
+            self.backing, self.end = backing, len(kept)
+        new = trace[len(trace) - min(len(trace), keep):]
+        backing[self.end:self.end + len(new)] = new
+        self.end += len(new)
+        self.shown = backing[self.end - keep:self.end]
+        return self.shown
+
+
 def spanning(rows: np.ndarray, window_ms: float) -> tuple[np.ndarray, np.ndarray]:
     """The frame's rows and their time axis [ms before the newest sample], starting exactly at
     −window: while the window fills (after a start or reset) the oldest row is repeated there,

@@ -245,17 +245,19 @@ def scope_rows(buffer, columns, sample_time_s, buckets, roughness_rows):
     rows = np.empty(2 * count + 2, dtype=np.intp)
     rows[0] = 0
     for b in range(count):
-        low_row, high_row = -1, -1
-        low_value, high_value = 0.0, 0.0
-        for p in range(b * size - lead, (b + 1) * size - lead):
-            r = min(max(p, 0), n - 1)                 # the padding repeats the edge rows' values
+        # the padding repeats the edge rows' values, and the first of equal values wins: the padded
+        # positions never win over the edge rows themselves, so only the rows in the bucket are read
+        start = max(b * size - lead, 0)
+        low_row, high_row = start, start
+        low_value = high_value = buffer[start, key_column]
+        for r in range(start + 1, min((b + 1) * size - lead, n)):
             value = buffer[r, key_column]
-            if low_row < 0 or value < low_value:
-                low_row, low_value = p, value
-            if high_row < 0 or value > high_value:
-                high_row, high_value = p, value
-        rows[1 + 2 * b] = min(max(min(low_row, high_row), 0), n - 1)
-        rows[2 + 2 * b] = min(max(max(low_row, high_row), 0), n - 1)
+            if value < low_value:
+                low_row, low_value = r, value
+            if value > high_value:
+                high_row, high_value = r, value
+        rows[1 + 2 * b] = min(low_row, high_row)
+        rows[2 + 2 * b] = max(low_row, high_row)
     rows[-1] = n - 1
     kept = 1
     for i in range(1, len(rows)):

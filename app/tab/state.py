@@ -21,8 +21,8 @@ def window_rows(values: dict, sample_time_s: float) -> int:
 
 class LabState:
     """The running exercise of a tab.  Frames, the worker, actions and the inspector read and
-    change it holding ``lock``; the buffer is replaced, never changed in place, so a reader may
-    keep a reference without the lock."""
+    change it holding ``lock``; the buffer is replaced, the rows it holds never change
+    (``scope.ScopeWindow``), so a reader may keep a reference without the lock."""
 
     def __init__(self):
         self.lock = threading.Lock()
@@ -32,6 +32,7 @@ class LabState:
         self.running = False
         self.columns: dict[str, int] = {}        # simulation column -> buffer column
         self.buffer = np.empty((0, 1))            # time [s], then the simulation's columns
+        self.window = scope.ScopeWindow()         # where ``buffer`` lives
         self.recording: tuple[str, bytes] | None = None   # the uploaded file, as it came
 
     def load(self, exercise: Exercise, values: dict, simulation, recording) -> None:
@@ -74,7 +75,7 @@ class LabState:
 
     def append(self, trace: np.ndarray) -> None:
         """New samples into the scope window (call holding ``lock``)."""
-        self.buffer = scope.append(self.buffer, trace, self.window_rows())
+        self.buffer = self.window.append(self.buffer, trace, self.window_rows())
 
     def step_one(self) -> str:
         """Pause and advance one sample; the stop message ("" while it holds)."""

@@ -25,6 +25,7 @@ on a 41×41 grid.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 from numba import njit
@@ -79,17 +80,27 @@ class FuzzyBasisNetwork:
 
     def predict(self, current_a, position_m) -> np.ndarray:
         inputs = normalise(current_a, position_m)
-        shape = inputs.shape[:-1]
-        phi = self._basis(-distances(inputs.reshape(-1, 2)))
-        return (phi @ self.weights).reshape(shape)
+        return self.predict_at(distances(inputs.reshape(-1, 2))).reshape(inputs.shape[:-1])
+
+    def predict_at(self, d2: np.ndarray) -> np.ndarray:
+        """Eq. 33 at inputs given by their squared distances d² (n, 25) to the centres (``distances``)."""
+        return self._basis(-d2) @ self.weights
 
     def rmse(self, current_a, position_m, target) -> float:
         return float(np.sqrt(np.mean((self.predict(current_a, position_m) - np.asarray(target)) ** 2)))
 
+    def rmse_at(self, d2: np.ndarray, target) -> float:
+        """``rmse`` at inputs given by their squared distances d² to the centres (``grid_distances``)."""
+        return float(np.sqrt(np.mean((self.predict_at(d2) - np.asarray(target)) ** 2)))
+
     def train(self, current_a, position_m, target, epochs: int, rate: float,
               train_weights: bool = False) -> list[float]:
         """Steepest descent (batch) on the relative MSE; returns the training RMSE per epoch."""
-        d2 = distances(normalise(current_a, position_m).reshape(-1, 2))   # the inputs stay: once
+        return self.train_at(distances(normalise(current_a, position_m).reshape(-1, 2)), target, epochs, rate,
+                             train_weights)
+
+    def train_at(self, d2: np.ndarray, target, epochs: int, rate: float, train_weights: bool = False) -> list[float]:
+        """``train`` on inputs given by their squared distances d² (n, 25) to the centres."""
         minus_d2, twice_d2 = -d2, 2.0 * d2
         target = np.asarray(target, float).ravel()
         scale = max(float(np.var(target)), 1e-300)
@@ -143,6 +154,16 @@ def test_grid(n: int = TEST_POINTS) -> tuple[np.ndarray, np.ndarray]:
     return training_grid(n)
 
 
+@lru_cache(maxsize=4)
+def grid_distances(n: int) -> np.ndarray:
+    """``distances`` (n², 25) of the n×n grid's operating points (``training_grid``), read-only: the
+    live view trains and tests on the same grids at every frame, so they are computed once."""
+    currents, positions = training_grid(n)
+    d2 = distances(normalise(currents, positions).reshape(-1, 2))
+    d2.flags.writeable = False
+    return d2
+
+
 @dataclass
 class TrainedPair:
     """The two networks (k_i [N/A], k_s [N/m]) and their RMSE histories."""
@@ -192,9 +213,9 @@ class LiveTraining:
         """``epochs`` more steps of steepest descent on both networks."""
         if epochs <= 0:
             return
-        currents, positions = training_grid()
-        self.ki.train(currents, positions, self.targets[0], epochs, self.rate, self.train_weights)
-        self.ks.train(currents, positions, self.targets[1], epochs, self.rate, self.train_weights)
+        d2 = grid_distances(TRAINING_POINTS)
+        self.ki.train_at(d2, self.targets[0], epochs, self.rate, self.train_weights)
+        self.ks.train_at(d2, self.targets[1], epochs, self.rate, self.train_weights)
         self.epoch += int(epochs)
 
     def advance_to(self, epoch: int) -> None:

@@ -32,9 +32,11 @@ import numpy as np
 from lab_modules.claims import Claim
 from lab_modules.estimators.adaline import miso_run
 from lab_modules.estimators.fuzzy_basis_network import (
+    TEST_POINTS,
     FuzzyBasisNetwork,
     LiveTraining,
     TrainedPair,
+    grid_distances,
     test_grid,
     training_grid,
 )
@@ -138,8 +140,9 @@ def _test_targets(stencil_a: float, stencil_m: float, intercept: bool):
 def test_rmse(values: dict, ki: FuzzyBasisNetwork, ks: FuzzyBasisNetwork) -> tuple[float, float]:
     """RMSE [N/A], [N/mm] of the networks against the noise-free LSM factors on the 41×41 grid."""
     kw = lsm_kwargs(values)
-    currents, positions, ki_true, ks_true = _test_targets(kw["stencil_a"], kw["stencil_m"], kw["intercept"])
-    return ki.rmse(currents, positions, ki_true), ks.rmse(currents, positions, ks_true) / N_PER_MM
+    _, _, ki_true, ks_true = _test_targets(kw["stencil_a"], kw["stencil_m"], kw["intercept"])
+    d2 = grid_distances(TEST_POINTS)
+    return ki.rmse_at(d2, ki_true), ks.rmse_at(d2, ks_true) / N_PER_MM
 
 
 # -- ADALINE in the closed loop -------------------------------------------------------------------
