@@ -12,7 +12,8 @@ import asyncio
 import time
 from pathlib import Path
 
-from app.commands.load_bench import TARGET_BYTES_PER_S, Tab, lab_server, scope_titles
+from app.commands.lab_processes import lab_server
+from app.commands.load_bench import TARGET_BYTES_PER_S, Tab, scope_titles
 from app.panels.scope_charts import SCOPE_BUCKETS
 
 FRAME_RATE = 25.0          # scope updates per second a tab gets from an idle server

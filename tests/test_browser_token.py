@@ -16,7 +16,8 @@ import msgspec
 import pytest
 
 from app.commands.browser_bench import ROOT, VIEWPORT, free_port
-from app.commands.load_bench import PROTOCOL, wait_http
+from app.commands.lab_processes import wait_http
+from app.commands.load_bench import PROTOCOL
 from tests.conftest import browser_only
 from tests.wsclient import CAMERA
 

@@ -19,7 +19,8 @@ from pathlib import Path
 
 import pytest
 
-from app.commands.load_bench import STALL_S, Tab, lab_server, scope_titles
+from app.commands.lab_processes import lab_server
+from app.commands.load_bench import STALL_S, Tab, scope_titles
 from tests.wsclient import run_async
 
 pytestmark = pytest.mark.classroom

@@ -213,7 +213,7 @@ def test_a_full_hall_answers_with_the_full_page(tmp_path):
     import urllib.error
     import urllib.request
 
-    from app.commands.load_bench import lab_server
+    from app.commands.lab_processes import lab_server
     from app.hall import PAGE_LOADS
     port = 8470
     log = tmp_path / "hall.log"
@@ -316,7 +316,7 @@ def test_wrong_class_tokens_are_throttled_across_connections(tmp_path):
 def test_the_hall_keeps_the_token_off_every_command_line(tmp_path):
     """``serve --workers 2`` with the token in the environment: no process of the hall shows it on
     its command line, and a tab through HAProxy is asked for it and let in."""
-    from app.commands.load_bench import lab_server, process_tree
+    from app.commands.lab_processes import lab_server, process_tree
     from app.infra.access import TOKEN_VARIABLE
     port = 8473
     token = "q7mz-k3pt-9hwa"

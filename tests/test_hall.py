@@ -21,7 +21,8 @@ from pathlib import Path
 
 import pytest
 
-from app.commands.load_bench import Tab, process_tree, scope_titles, wait_http
+from app.commands.lab_processes import process_tree, wait_http
+from app.commands.load_bench import Tab, scope_titles
 from app.hall import HAPROXY_MISSING, haproxy_config
 from tests.conftest import Tab as BrowserTab
 from tests.conftest import browser_only

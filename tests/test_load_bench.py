@@ -53,3 +53,13 @@ def test_a_tab_that_ended_in_the_window_stalled_with_its_reason():
 ])
 def test_why_a_connection_ended(received, why):
     assert _closing(websockets.ConnectionClosed(received, None)) == why
+
+
+def test_a_tab_on_another_panel_is_judged_by_its_messages():
+    """Its Scope is hidden, so it gets no scope updates: its readouts and status every second keep it alive."""
+    away = _tab([], frame_times=[float(k) for k in range(10)])
+    away.panel = "Pole map"
+    assert not away.watches_scope and away.stall(0.0, 10.0) is None
+    silent = _tab([], frame_times=[1.0, 2.0])
+    silent.panel = "Analysis"
+    assert silent.stall(0.0, 10.0) == "no message at all for 8.0 s until the end of the window"

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from app.commands.load_bench import wait_http
+from app.commands.lab_processes import wait_http
 from app.panels.scene_view import SCENE_REFRESH
 
 ROOT = Path(__file__).resolve().parents[2]

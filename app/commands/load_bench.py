@@ -32,15 +32,11 @@ import itertools
 import json
 import os
 import random
-import socket
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
-import urllib.request
 from collections import Counter
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -49,12 +45,12 @@ import viser
 import websockets.asyncio.client
 import zstandard
 
+from app.commands.lab_processes import cpu_seconds, lab_server, process_tree
 from app.commands.load_report import MIN_UPDATES_PER_S, Step, print_step, print_summary
 from app.commands.tab_mix import KALMAN_NOISE_MOVE, PANEL_MIX, SliderMove, mix_move
-from app.infra.viser_internals import SHOWN_LABEL
+from app.infra.viser_internals import HIDDEN_LABEL, SHOWN_LABEL
 from lab_modules.exercises import SCOPE, get, registry
 
-ROOT = Path(__file__).resolve().parents[2]
 PROTOCOL = f"viser-v{viser.__version__}"      # the subprotocol a viser client of this version offers
 TARGET_BYTES_PER_S = 150e3
 CAMERA_PERIOD_S = 3.0                         # each tab sends a camera message this often ...
@@ -64,6 +60,9 @@ SETTLE_S = 4.0                                # after the last new tab of a step
 SETTLE_MAX_S = 90.0                           # ... and until every tab streams (a busy machine builds slowly)
 WORKER_HEADER = "X-Lab-Worker"                # set by the generated HAProxy configuration
 STALL_S = 2.0                                 # a tab with no scope update for longer than this has stalled
+#: A tab on another panel gets no scope updates (the Scope is hidden); it gets its readouts, status line
+#: and 3D view every second or so: with no message at all for longer than this, it has stalled.
+STALL_AWAY_S = 5.0
 
 
 def scope_titles(exercise_name: str) -> tuple[str, ...]:
@@ -147,7 +146,8 @@ class Tab:
                 self.answers.append({"type": "GuiUpdateMessage", "uuid": message["uuid"],
                                      "updates": {"value": self.switch_to}})
                 self.switch_to = None
-            elif kind == "GuiButtonMessage" and label == f"{SHOWN_LABEL} {self.panel}":   # as the browser's beacon
+            elif kind == "GuiButtonMessage" and label in (f"{SHOWN_LABEL} {self.panel}", f"{HIDDEN_LABEL} {SCOPE}") \
+                    and label != f"{HIDDEN_LABEL} {self.panel}":   # as the browser's beacons: this panel, not the Scope
                 self.answers.append({"type": "GuiUpdateMessage", "uuid": message["uuid"], "updates": {"value": True}})
             return "GUI set-up"
         if kind.startswith("Scene") or kind.endswith("SceneNodeMessage") or "Mesh" in kind or "Label" in kind:
@@ -252,17 +252,27 @@ class Tab:
     def _ended(self, why: str) -> None:
         self.closed, self.ended_at = why, time.perf_counter()
 
+    @property
+    def watches_scope(self) -> bool:
+        """Whether the tab shows the Scope (else its scope is hidden and gets no updates)."""
+        return self.panel == SCOPE
+
     def longest_gap(self, start: float, end: float) -> tuple[float, float, float]:
-        """(seconds, start, end) of the longest time without a scope update in [start, end)."""
-        arrivals = [start] + [t for t in self.scope_times if start <= t < end] + [end]
+        """(seconds, start, end) of the longest time without a scope update in [start, end) (without
+        any message, for a tab on another panel)."""
+        arrivals = [start] + [t for t in (self.scope_times if self.watches_scope else self.frame_times)
+                              if start <= t < end] + [end]
         return max((b - a, a, b) for a, b in itertools.pairwise(arrivals))
 
-    def stall(self, start: float, end: float, limit_s: float = STALL_S) -> str | None:
+    def stall(self, start: float, end: float, limit_s: float | None = None) -> str | None:
         """Why the tab stalled in [start, end): it ended early, or no scope update came for more
-        than ``limit_s`` (then whether any message came in the longest such gap, and whether the
-        gap lasted to the end: a silent connection, not a slow server); None if it did not."""
+        than ``limit_s`` (default ``STALL_S``; then whether any message came in the longest such
+        gap, and whether the gap lasted to the end: a silent connection, not a slow server), or,
+        on another panel, no message for more than ``STALL_AWAY_S``; None if it did not."""
         if self.ended_at is not None and self.ended_at < end:
             return self.closed
+        if limit_s is None:
+            limit_s = STALL_S if self.watches_scope else STALL_AWAY_S
         gap_s, gap_start, gap_end = self.longest_gap(start, end)
         if gap_s <= limit_s:
             return None
@@ -282,81 +292,6 @@ class Tab:
     def rate(self, start: float, end: float) -> float:
         """Scope updates per second in [start, end)."""
         return sum(start <= t < end for t in self.scope_times) / (end - start)
-
-
-# -- the server under test ------------------------------------------------------------
-
-def process_tree(pid: int) -> list[int]:
-    """``pid`` and all its descendants (Linux ``/proc``)."""
-    children: dict[int, list[int]] = {}
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
-            except (OSError, IndexError, ValueError):
-                continue
-            children.setdefault(ppid, []).append(int(entry.name))
-    tree, todo = [], [pid]
-    while todo:
-        current = todo.pop()
-        tree.append(current)
-        todo += children.get(current, [])
-    return tree
-
-
-def cpu_seconds(pids: list[int]) -> float:
-    """User + system CPU time [s] of processes so far (gone processes count 0)."""
-    total = 0
-    for pid in pids:
-        with contextlib.suppress(OSError):
-            fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-            total += int(fields[11]) + int(fields[12])
-    return total / os.sysconf("SC_CLK_TCK")
-
-
-def port_free(port: int, host: str = "127.0.0.1") -> bool:
-    with socket.socket() as s:
-        try:
-            s.bind((host, port))
-        except OSError:
-            return False
-    return True
-
-
-def wait_http(url: str, process: subprocess.Popen, timeout_s: float, log: Path) -> None:
-    deadline = time.time() + timeout_s
-    while True:
-        try:
-            urllib.request.urlopen(url, timeout=5).close()
-            return
-        except OSError:
-            if process.poll() is not None or time.time() > deadline:
-                raise RuntimeError(f"the lab server did not start: {log.read_text()[-2000:]}") from None
-            time.sleep(0.3)
-
-
-@contextlib.contextmanager
-def lab_server(port: int, workers: int, exercise: str, log: Path,
-               extra: tuple[str, ...] = (), timeout_s: float = 180.0) -> Iterator[subprocess.Popen]:
-    """The lab on ``127.0.0.1:port`` in a child process (one lab process, or ``serve --workers``)."""
-    command = [sys.executable, "-m", "app", "--host", "127.0.0.1", "--port", str(port), "--exercise", exercise]
-    if workers > 1:
-        command += ["serve", "--workers", str(workers)]
-    command += list(extra)
-    root = Path(os.environ.get("LAB_BENCH_ROOT", ROOT))   # another tree's lab, for before/after runs
-    env = {**os.environ, "PYTHONPATH": str(root)}
-    with log.open("w") as out:
-        server = subprocess.Popen(command, cwd=root, stdout=out, stderr=subprocess.STDOUT, env=env)
-        try:
-            wait_http(f"http://127.0.0.1:{port}/", server, timeout_s, log)
-            yield server
-        finally:
-            server.terminate()
-            try:
-                server.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                server.kill()
-                server.wait()
 
 
 # -- the measurement ---------------------------------------------------------------
@@ -384,7 +319,7 @@ async def _measure(url: str, steps: list[int], window_s: float, server_pid: int,
             end = time.perf_counter()
             server_cpu = cpu_seconds(pids) - server_cpu
             own_cpu = cpu_seconds([os.getpid()]) - own_cpu
-            rates = [t.rate(start, end) for t in tabs]
+            rates = [t.rate(start, end) for t in tabs if t.watches_scope] or [0.0]
             rates_bytes = [(t.received_bytes - r) / (end - start) / 1e3 for t, r in zip(tabs, received)]
             step = Step(clients, min(rates), statistics.median(rates), statistics.median(rates_bytes),
                         max(rates_bytes), server_cpu / (end - start), own_cpu / (end - start),
@@ -392,7 +327,8 @@ async def _measure(url: str, steps: list[int], window_s: float, server_pid: int,
                         sum(round(r * (end - start)) for r in rates), end - start,
                         [x for t in tabs for x in t.latencies_in(start, end)],
                         [{"tab": number, "worker": t.worker, "why": why}
-                         for number, t in enumerate(tabs, 1) if (why := t.stall(start, end))])
+                         for number, t in enumerate(tabs, 1) if (why := t.stall(start, end))],
+                        on_scope=sum(t.watches_scope for t in tabs))
             results.append(step)
             report(step)
             if not step.ok and not all_steps:
@@ -412,7 +348,7 @@ async def _settle(tabs: list[Tab]) -> None:
     await asyncio.sleep(SETTLE_S)
     while time.perf_counter() - began < SETTLE_MAX_S - SETTLE_S:
         now = time.perf_counter()
-        if all(t.scope_times and t.scope_times[-1] > now - 1.0 for t in tabs if t.closed is None):
+        if all(t.scope_times and t.scope_times[-1] > now - 1.0 for t in tabs if t.closed is None and t.watches_scope):
             break
         await asyncio.sleep(0.5)
     await asyncio.sleep(min(SETTLE_S, max(0.0, SETTLE_MAX_S - (time.perf_counter() - began))))

@@ -27,13 +27,15 @@ class Step:
     window_s: float
     readout_latencies_s: list[float] = field(default_factory=list)   # slider move -> new readout, all tabs
     stalls: list[dict] = field(default_factory=list)   # tab (1 = the first connected), worker, why (Tab.stall)
+    on_scope: int | None = None   # tabs showing the Scope, whose updates are counted (None: all)
 
     @property
     def ok(self) -> bool:
         return self.connected == self.clients and self.updates_min >= MIN_UPDATES_PER_S and not self.stalls
 
     def row(self) -> dict:
-        return {"clients": self.clients, "updates_per_s_min": round(self.updates_min, 1),
+        return {"clients": self.clients, "tabs_on_scope": self.clients if self.on_scope is None else self.on_scope,
+                "updates_per_s_min": round(self.updates_min, 1),
                 "updates_per_s_median": round(self.updates_median, 1),
                 "kB_per_s_median": round(self.kbytes_per_s_median, 1),
                 "kB_per_s_max": round(self.kbytes_per_s_max, 1),
@@ -61,7 +63,9 @@ def print_step(step: Step) -> None:
     """One line per step, then one per stalled tab."""
     r = step.row()
     print(f"  {r['clients']:4d} tabs: scope updates/s min {r['updates_per_s_min']:5.1f} "
-          f"median {r['updates_per_s_median']:5.1f}; {r['kB_per_s_median']:6.1f} kB/s per tab; "
+          f"median {r['updates_per_s_median']:5.1f}"
+          + (f" (the {r['tabs_on_scope']} tabs on the Scope)" if r["tabs_on_scope"] != r["clients"] else "")
+          + f"; {r['kB_per_s_median']:6.1f} kB/s per tab; "
           f"server {r['server_cores']:.2f} cores = {r['server_core_percent_per_tab']:.2f} % of a core "
           f"per tab ({r['server_cpu_ms_per_update']:.2f} ms per update = "
           f"{r['server_core_percent_per_tab_at_25_per_s']:.2f} % at 25/s); bench clients {r['bench_client_cores']:.2f} cores"

@@ -84,6 +84,10 @@ class LivePlots:
         self.drawn_until = None
         self.frames = 0
 
+    def draw_next(self) -> None:
+        """The next ``draw`` redraws, even at the same newest sample (the plots were left out while hidden)."""
+        self.next_draw, self.drawn_until = 0.0, None
+
     def draw(self, simulation, now: float, newest: float | None) -> None:
         """Redraw from ``simulation`` if ``LIVE_PERIOD_S`` has passed and its newest sample
         time ``newest`` moved on (call holding the tab's ``gui_lock``)."""

@@ -97,8 +97,14 @@ class AnalysisView:
         return first
 
     def add_pinned(self, gui) -> None:
-        """The key readouts of the worksheet's tasks, above the charts (in view at 1366 x 768)."""
+        """The key readouts of the worksheet's tasks, above the charts (in view at 1366 x 768); and
+        the Scope tab's beacon: its charts stream only while it is shown (``scope_shown``)."""
+        self.add_beacon(gui, SCOPE)
         self.pinned = gui.add_markdown("")
+
+    def scope_shown(self) -> bool:
+        """Whether the browser shows the Scope tab (so far as its beacon said; a new tab does)."""
+        return SCOPE in self.shown
 
     def add_readouts(self, gui, first: Analysis) -> None:
         self.shown_analysis = first

@@ -352,7 +352,7 @@ class LabSession:
         self.analysis.add_worksheet_beacons(gui, tabs)
         self.stream = Stream(self.client, self.gui_lock, self.state, self.generation, self._current, self.scene,
                              self.scene_view, charts, live, self.status, self.analysis.refresh_live_readouts,
-                             self.problems)
+                             self.problems, self.analysis.scope_shown)
 
         def put_beside() -> None:
             with self.gui_lock:

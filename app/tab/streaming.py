@@ -43,13 +43,18 @@ class Stream:
 
     def __init__(self, client, gui_lock, state: LabState, generation: int, is_current: Callable[[int], bool],
                  scene, scene_view: SceneView, scope: ScopeCharts, live: LivePlots, status: SimulationStatus,
-                 refresh_readouts: Callable[[], None], problems: Problems):
+                 refresh_readouts: Callable[[], None], problems: Problems,
+                 scope_shown: Callable[[], bool]):
+        """``scope_shown()``: whether the browser shows the Scope tab; its charts and live plots are
+        sent only then (a hidden tab's charts are not drawn: the whole window goes out on return)."""
         self.client, self.gui_lock, self.state = client, gui_lock, state
         self.generation, self.is_current = generation, is_current
         self.scene, self.scene_view, self.scope, self.live = scene, scene_view, scope, live
         self.status, self.refresh_readouts, self.problems = status, refresh_readouts, problems
         self.stop_shown: tuple | None = None       # (message, simulation) of a stop not shown yet
         self.fitted = False                       # the scope's ranges fit the traces of a stopped run
+        self.scope_shown = scope_shown
+        self.left_out = False                     # frames were not sent while the Scope was hidden
         self.ticker: frames.Ticker | None = None
 
     def start(self) -> None:
@@ -159,18 +164,29 @@ class Stream:
         """Once a run stops or pauses, the scope's y ranges close in on what it shows (while it ran
         they held still and shrank only after ``scope.SHRINK_AFTER_S``: a start-up transient that
         left the window last could keep a range far too wide on the stopped scope)."""
-        if not self.gui_lock.acquire(timeout=FRAME_LOCK_WAIT_S):
+        if not self.scope_shown() or not self.gui_lock.acquire(timeout=FRAME_LOCK_WAIT_S):
             return
         try:
             if self.is_current(self.generation):
                 lab = self.state
                 self.fitted = self.scope.draw(lab.buffer, lab.simulation.sample_time_s, lab.window_ms(), now,
                                               closed=lambda: not self.is_current(self.generation), fit=True)
+                if self.left_out:                 # the live plots too, left out while hidden
+                    self.live.draw_next()
+                    self.live.draw(lab.simulation, now, self.scope.drawn_until)
+                    self.left_out = False
         finally:
             self.gui_lock.release()
 
     def draw(self, now: float) -> None:
-        """The scope and live plots at the newest samples (call holding ``gui_lock``)."""
+        """The scope and live plots at the newest samples, while the Scope tab is shown (call
+        holding ``gui_lock``)."""
+        if not self.scope_shown():
+            self.left_out = True
+            return
+        if self.left_out:                         # back on the Scope: the whole window at once
+            self.left_out = False
+            self.live.draw_next()
         lab = self.state
         self.scope.draw(lab.buffer, lab.simulation.sample_time_s, lab.window_ms(), now,
                         closed=lambda: not self.is_current(self.generation))
