@@ -361,7 +361,10 @@ def ramp(clients: int, steps: int) -> list[int]:
 
 def tab_factory(exercise: str, breakdown: bool, slider_every: int, mix: bool):
     """The tabs' maker: each on ``exercise`` with the Scope shown, or with ``mix`` the k-th on the
-    k-th exercise (``registry`` order, in turn) and on ``PANEL_MIX[k]`` (``app.commands.tab_mix``)."""
+    k-th exercise (``registry`` order, in turn) and on ``PANEL_MIX[k + k // exercises]``
+    (``app.commands.tab_mix``): each round of the exercises moves the panels on by one, so that
+    every exercise has tabs on the Scope (with 12 exercises and the Scope every other panel, the
+    Scope tabs of one round are all on the even-numbered exercises)."""
     if not mix:
         titles = scope_titles(exercise)
         return lambda url, k: Tab(url, titles, breakdown, slider_every)
@@ -371,7 +374,7 @@ def tab_factory(exercise: str, breakdown: bool, slider_every: int, mix: bool):
     def new_tab(url: str, k: int) -> Tab:
         name = names[k % len(names)]
         return Tab(url, scope_titles(name), breakdown, slider_every, moves[name],
-                   switch_to=None if name == exercise else get(name).title, panel=PANEL_MIX[k % len(PANEL_MIX)])
+                   switch_to=None if name == exercise else get(name).title, panel=PANEL_MIX[(k + k // len(names)) % len(PANEL_MIX)])
     return new_tab
 
 
