@@ -216,6 +216,9 @@ def _parser() -> argparse.ArgumentParser:
     bench.add_argument("--analysis", nargs="*", default=None, metavar="NAME",
                        help="instead: CPU of a slider move with the Scope shown, of opening each panel and of "
                             "the first open, per exercise (default: every exercise)")
+    bench.add_argument("--runs", type=int, default=1, metavar="K",
+                       help="with --clients: the whole ramp K times (1 ... 10), each on a fresh server; "
+                            "prints in how many runs each step held")
     bench.add_argument("--all-steps", action="store_true",
                        help="with --clients: go on after a step below the target (default: stop there)")
     return parser
@@ -256,7 +259,7 @@ def main(argv: list[str] | None = None) -> int:
             from app.commands.load_bench import main as load_bench_main
             return load_bench_main(args.clients, args.workers, args.steps, args.window, args.exercise,
                                    args.bench_port, args.breakdown, args.json, args.all_steps,
-                                   args.slider_every, args.mix)
+                                   args.slider_every, args.mix, args.runs)
         if args.command == "bench":
             from app.commands.bench import main as bench_main
             return bench_main(headless.bench_seconds(args.seconds), args.json)

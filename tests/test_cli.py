@@ -144,6 +144,20 @@ def test_bad_input_exits_2_with_one_line(argv, must_contain, capsys):
         assert token in err, f"{token!r} not in {err!r}"
 
 
+@pytest.mark.parametrize("argv, must_contain", [
+    (["--clients", "0"], ["--clients 0", "1 ... 1000"]),
+    (["--clients", "5", "--workers", "0"], ["--workers 0", "1 ... 16"]),
+    (["--clients", "5", "--steps", "0"], ["--steps 0", "1 ... 50"]),
+    (["--clients", "5", "--window", "-1"], ["--window -1", "1 ... 120"]),
+    (["--clients", "5", "--slider-every", "-2"], ["--slider-every -2", "0 ... 100"]),
+    (["--clients", "5", "--runs", "11"], ["--runs 11", "1 ... 10"]),
+])
+def test_bad_bench_options_exit_2_with_one_line_before_any_server(argv, must_contain, capsys):
+    assert main(["bench", *argv]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and len(err.splitlines()) == 1 and all(token in err for token in must_contain), err
+
+
 def test_unknown_start_exercise_exits_2_before_serving(capsys):
     assert main(["--exercise", "no_such_exercise", "--port", "1"]) == 2
     _, err = capsys.readouterr()

@@ -4,7 +4,7 @@ import pytest
 import websockets
 from websockets.frames import Close
 
-from app.commands.load_bench import Tab, _closing
+from app.commands.load_bench import Tab, _closing, held_in_every_run
 
 
 def _tab(scope_times: list[float], frame_times: list[float] | None = None) -> Tab:
@@ -63,3 +63,9 @@ def test_a_tab_on_another_panel_is_judged_by_its_messages():
     silent = _tab([], frame_times=[1.0, 2.0])
     silent.panel = "Analysis"
     assert silent.stall(0.0, 10.0) == "no message at all for 8.0 s until the end of the window"
+
+
+def test_a_step_holds_in_the_runs_where_it_was_ok():
+    runs = [{"steps": [{"clients": 25, "ok": True}, {"clients": 50, "ok": False}]},
+            {"steps": [{"clients": 25, "ok": True}, {"clients": 50, "ok": True}]}]
+    assert held_in_every_run(runs) == {25: 2, 50: 1}

@@ -50,6 +50,7 @@ from app.commands.load_report import MIN_UPDATES_PER_S, Step, print_step, print_
 from app.commands.tab_mix import KALMAN_NOISE_MOVE, PANEL_MIX, SliderMove, mix_move
 from app.infra.viser_internals import HIDDEN_LABEL, SHOWN_LABEL
 from lab_modules.exercises import SCOPE, get, registry
+from lab_modules.parameters import ParameterError
 
 PROTOCOL = f"viser-v{viser.__version__}"      # the subprotocol a viser client of this version offers
 TARGET_BYTES_PER_S = 150e3
@@ -409,9 +410,36 @@ def run(clients: int, workers: int, steps: int, window_s: float, exercise: str, 
     return result
 
 
+#: the options' valid ranges: (option, lowest, highest)
+OPTION_RANGES = {"clients": ("--clients", 1, 1000), "workers": ("--workers", 1, 16), "steps": ("--steps", 1, 50),
+                 "window_s": ("--window", 1.0, 120.0), "slider_every": ("--slider-every", 0, 100),
+                 "runs": ("--runs", 1, 10)}
+
+
+def held_in_every_run(results: list[dict]) -> dict[int, int]:
+    """Per step (tabs): in how many of the runs it held (every tab at the target, none stalled)."""
+    held: dict[int, int] = {}
+    for result in results:
+        for step in result["steps"]:
+            held[step["clients"]] = held.get(step["clients"], 0) + bool(step["ok"])
+    return held
+
+
+def check_options(**values) -> None:
+    """``ParameterError`` (one line, the valid range) for an option outside ``OPTION_RANGES``."""
+    for name, value in values.items():
+        option, low, high = OPTION_RANGES[name]
+        if not low <= value <= high:
+            raise ParameterError(f"{option} {value:g} is out of range: expected {low:g} ... {high:g}")
+
+
 def main(clients: int, workers: int, steps: int, window_s: float, exercise: str, port: int,
          breakdown: bool, as_json: bool, all_steps: bool = False, slider_every: int = SLIDER_EVERY,
-         mix: bool = False) -> int:
+         mix: bool = False, runs: int = 1) -> int:
+    """The ramp ``runs`` times, each on a fresh server; a step holds if it held in every run."""
+    check_options(clients=clients, workers=workers, steps=steps, window_s=window_s, slider_every=slider_every,
+                  runs=runs)
+
     def report(step: Step) -> None:
         if not as_json:
             print_step(step)
@@ -420,14 +448,22 @@ def main(clients: int, workers: int, steps: int, window_s: float, exercise: str,
         moves = f"a slider move every ~{CAMERA_PERIOD_S * slider_every:.0f} s" if slider_every else "no slider moves"
         print(f"{'every exercise and panel (--mix)' if mix else exercise}: {workers} worker(s), "
               f"up to {clients} headless tabs ({moves}) (load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores at start)", flush=True)
-    try:
-        result = run(clients, workers, steps, window_s, exercise, port, breakdown, report, all_steps, slider_every,
-                     mix)
-    except RuntimeError as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 1
+    results = []
+    for number in range(1, runs + 1):
+        if runs > 1 and not as_json:
+            print(f"run {number} of {runs}:", flush=True)
+        try:
+            results.append(run(clients, workers, steps, window_s, exercise, port, breakdown, report, all_steps,
+                               slider_every, mix))
+        except RuntimeError as error:
+            print(f"error: {error}", file=sys.stderr)
+            return 1
+        if not as_json:
+            print_summary(results[-1])
     if as_json:
-        print(json.dumps(result, indent=2))
-    else:
-        print_summary(result)
+        print(json.dumps(results[0] if runs == 1 else {"runs": results, "steps_held": held_in_every_run(results)},
+                         indent=2))
+    elif runs > 1:
+        print("each step over the runs: " + "; ".join(f"{tabs} tabs held in {held} of {runs}"
+                                                      for tabs, held in held_in_every_run(results).items()))
     return 0
