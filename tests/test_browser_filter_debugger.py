@@ -40,7 +40,7 @@ def test_debugger_steps_back_ten_samples(open_tab):
 
     canvas = page.locator("canvas").first
     rig = _settled(canvas)
-    page.get_by_label("3D view shows", exact=True).click()
+    page.get_by_label("Ellipsoids in 3D", exact=True).click()
     page.get_by_role("option", name="x / v / i", exact=True).click()
     ellipsoids = _settled(canvas)
     assert ellipsoids != rig

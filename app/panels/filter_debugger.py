@@ -197,7 +197,7 @@ class FilterDebugger:
             self.triples = list(itertools.combinations(range(len(states)), 3))
             self.covariance = None if scene is None or not self.triples else CovarianceView(scene, rig, states)
             self.view_3d = None if self.covariance is None else gui.add_dropdown(
-                "3D view shows", (THE_RIG, *(" / ".join(symbol(states[k][0]) for k in t) for t in self.triples)),
+                "Ellipsoids in 3D", (THE_RIG, *(" / ".join(symbol(states[k][0]) for k in t) for t in self.triples)),
                 initial_value=THE_RIG, hint="While paused: the 3σ ellipsoids of P⁻ and P⁺ for three states around "
                                             "the true state, in place of the rig.")
             self.window = gui.add_slider("NEES/NIS window", min=50, max=4000, step=50, initial_value=1000,
