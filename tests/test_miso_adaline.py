@@ -5,7 +5,7 @@ the force it identifies online in the stiffness map's closed loop."""
 import numpy as np
 import pytest
 
-from lab_modules.estimators.adaline import miso_run, miso_step, siso_step
+from lab_modules.estimators.adaline import miso_run, miso_step, siso_run, siso_step
 from lab_modules.exercises.stiffness_map import EXERCISE, adaline_run
 from lab_modules.plants.axial_bearing import AXIAL
 
@@ -67,3 +67,16 @@ def test_miso_starts_from_zero_and_is_within_one_percent_after_50_ms(run):
     assert estimate[0] == 0.0
     late = (t >= 0.05) & (t < 0.1)
     assert abs(np.mean(estimate[late] - force[late])) < 0.01 * AXIAL.weight_n
+
+
+def test_siso_run_is_siso_step_at_every_sample_digit_for_digit():
+    rng = np.random.default_rng(3)
+    regressors, targets = rng.uniform(-1.0, 1.0, 500), rng.normal(6.0, 1.0, 500)
+    weight, expected = 5.0, np.empty(500)
+    for k in range(500):                                   # the slow, obvious twin
+        expected[k] = weight * regressors[k]
+        weight = siso_step(weight, regressors[k], targets[k], 0.05)
+    out = np.empty(500)
+    assert siso_run(5.0, regressors, targets, 0.05, out) == weight
+    assert np.array_equal(out, expected)
+    assert abs(weight - 5.0) > 0.1                         # it learned something

@@ -17,6 +17,8 @@ from lab_modules.estimators.fuzzy_basis_network import (
     FuzzyBasisNetwork,
     evaluate,
     grid_distances,
+    grid_layout,
+    membership_layout,
     test_grid,
     training_grid,
 )
@@ -158,3 +160,31 @@ def test_the_live_view_on_its_fixed_grids_computes_what_the_network_computes_fro
                                                                                          3, 0.1)
     assert np.array_equal(by_points.widths, by_distances.widths)
     assert not grid_distances(20).flags.writeable
+
+
+@pytest.mark.parametrize("points, train_weights", [("grid", False), ("grid", True), ("nodes", False), ("scattered", True)])
+def test_compiled_training_follows_its_numpy_twin(points, train_weights):
+    """``train_on`` (compiled, eq. 32 factorised along the axes) takes the steps ``train`` takes: the same
+    widths, weights and RMSE history up to the float order (1e-9 relative over 300 epochs)."""
+    rng = np.random.default_rng(11)
+    if points == "grid":
+        currents, positions = training_grid()
+    elif points == "nodes":
+        currents, positions = CENTRES[:, 0] * 1.5, CENTRES[:, 1] * 0.5e-3
+    else:                                               # no two points share an axis value: no saving, same result
+        currents, positions = rng.uniform(-1.5, 1.5, 90), rng.uniform(-0.5e-3, 0.5e-3, 90)
+    target = lsm_factors(currents, positions)[0] + rng.normal(0.0, 0.5, currents.size)
+    twin, compiled = (FuzzyBasisNetwork.from_table(TABLE_4_KI_N_PER_A, 0.4) for _ in range(2))
+    expected = twin.train(currents, positions, target, 300, 0.1, train_weights)
+    history = compiled.train_on(membership_layout(currents, positions), target, 300, 0.1, train_weights)
+    assert not np.array_equal(twin.widths, FuzzyBasisNetwork.from_table(TABLE_4_KI_N_PER_A, 0.4).widths)
+    assert history == pytest.approx(expected, rel=1e-9)
+    assert compiled.widths == pytest.approx(twin.widths, rel=1e-9)
+    assert compiled.weights == pytest.approx(twin.weights, rel=1e-9)
+
+
+def test_membership_layout_holds_the_squared_distances_to_the_centres():
+    layout = grid_layout(20)
+    d2 = (layout.current_offsets2[:, layout.current_index] + layout.position_offsets2[:, layout.position_index]).T
+    assert np.array_equal(d2, grid_distances(20))
+    assert layout.current_offsets2.shape == layout.position_offsets2.shape == (25, 20)

@@ -21,7 +21,7 @@ Two uses in the paper (their regressors did not survive the text; reconstructed)
     the local k_i [N/A] and k_s [N/mm] of the current operating point (x in mm,
     so that one η serves both weights).  A lab reconstruction, stated as such.
 (b) SISO: F_Magnet = k_Magnet · φ(i, x), φ = (i0+i)²/(s0-x)² - (i0-i)²/(s0+x)²
-    (eq. 1); the weight is k_Magnet.  ``siso_step``; the lab works in the
+    (eq. 1); the weight is k_Magnet.  ``siso_step``, ``siso_run``; the lab works in the
     paper's units (φ in A²/mm², k_Magnet in N·mm²/A²) so that η is a plain number.
 
 The update is proportional to the input: where the magnet force is zero (φ = 0,
@@ -40,6 +40,15 @@ def siso_step(weight, regressor, target, rate):
     error = target - weight * regressor
     return weight + rate * error * regressor
 
+
+@njit(cache=True, nogil=True)
+def siso_run(weight, regressors, targets, rate, out):
+    """The SISO ADALINE over a record (``siso_step`` at every sample): writes the a-priori estimates
+    F̂(k) = ŵ(k) φ(k) into ``out``; returns the last weight."""
+    for k in range(targets.size):
+        out[k] = weight * regressors[k]
+        weight = siso_step(weight, regressors[k], targets[k], rate)
+    return weight
 
 
 @njit(cache=True, nogil=True)

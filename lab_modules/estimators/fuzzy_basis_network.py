@@ -26,6 +26,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import lru_cache
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -57,6 +58,74 @@ def normalise(current_a, position_m) -> np.ndarray:
 def distances(inputs: np.ndarray) -> np.ndarray:
     """Squared distances ‖u - c_r‖² (n, 25) of normalised inputs (n, 2) to the rule centres."""
     return np.sum((inputs[:, None, :] - CENTRES[None]) ** 2, axis=-1)
+
+
+class MembershipLayout(NamedTuple):
+    """Training inputs laid out for ``train_widths``: eq. 32 factorises along the two normalised
+    axes, μ_r = exp(-(u_i - c_r,i)² / σ_r²) · exp(-(u_x - c_r,x)² / σ_r²), and a grid of n × n points
+    has only n distinct values per axis, so each epoch takes 2 n exponentials per rule instead of n²."""
+
+    current_offsets2: np.ndarray    # (25, J) (u_i - c_r,i)² of the J distinct normalised currents [-]
+    position_offsets2: np.ndarray   # (25, K) (u_x - c_r,x)² of the K distinct normalised positions [-]
+    current_index: np.ndarray       # (n,) each training point's distinct current (column of current_offsets2)
+    position_index: np.ndarray      # (n,) each training point's distinct position (column of position_offsets2)
+
+
+def membership_layout(current_a, position_m) -> MembershipLayout:
+    """``MembershipLayout`` of the operating points (i [A], x [m])."""
+    inputs = normalise(current_a, position_m).reshape(-1, 2)
+    currents, current_index = np.unique(inputs[:, 0], return_inverse=True)
+    positions, position_index = np.unique(inputs[:, 1], return_inverse=True)
+    return MembershipLayout((currents[None] - CENTRES[:, 0, None]) ** 2, (positions[None] - CENTRES[:, 1, None]) ** 2,
+                            current_index.ravel(), position_index.ravel())
+
+
+@njit(cache=True, nogil=True)
+def train_widths(layout, target, weights, widths, epochs, rate, train_weights, scale):
+    """``epochs`` steps of batch steepest descent on the relative MSE (MSE / ``scale``, the targets'
+    variance) of eq. 33 at the points of ``layout``; ``widths`` and (if ``train_weights``) ``weights``
+    in place.  Returns the training RMSE per epoch (before each step), in the targets' unit.  The
+    compiled form of ``FuzzyBasisNetwork.train_at`` (its twin: same steps, float order aside)."""
+    rules, points = weights.size, target.size
+    across = np.empty((rules, layout.current_offsets2.shape[1]))
+    along = np.empty((rules, layout.position_offsets2.shape[1]))
+    phi, grad_sigma, grad_w = np.empty(rules), np.empty(rules), np.empty(rules)
+    history = np.empty(epochs)
+    for epoch in range(epochs):
+        for r in range(rules):
+            width2 = widths[r] ** 2
+            for j in range(across.shape[1]):
+                across[r, j] = np.exp(-layout.current_offsets2[r, j] / width2)    # eq. 32, current factor
+            for j in range(along.shape[1]):
+                along[r, j] = np.exp(-layout.position_offsets2[r, j] / width2)    # eq. 32, position factor
+            grad_sigma[r] = 0.0
+            grad_w[r] = 0.0
+        squares = 0.0
+        for n in range(points):
+            ic, ip = layout.current_index[n], layout.position_index[n]
+            total = 0.0
+            for r in range(rules):
+                phi[r] = across[r, ic] * along[r, ip]
+                total += phi[r]
+            normalising = 1.0 / max(total, 1e-300)
+            y = 0.0
+            for r in range(rules):
+                phi[r] *= normalising                                          # φ_r = μ_r / Σ μ
+                y += phi[r] * weights[r]                                       # eq. 33
+            error = y - target[n]
+            squares += error * error
+            for r in range(rules):
+                # ∂y/∂σ_r = φ_r (w_r - y) · 2 d²_r / σ_r³ (the factor 2 / σ_r³ after the sum) ;  ∂y/∂w_r = φ_r
+                d2 = layout.current_offsets2[r, ic] + layout.position_offsets2[r, ip]
+                grad_sigma[r] += error * phi[r] * (weights[r] - y) * d2
+                grad_w[r] += error * phi[r]
+        history[epoch] = np.sqrt(squares / points)
+        for r in range(rules):
+            step = widths[r] - rate * (2.0 * grad_sigma[r] * (2.0 / widths[r] ** 3) / (points * scale))
+            if train_weights:
+                weights[r] -= rate * (2.0 * grad_w[r] / (points * scale)) * scale
+            widths[r] = min(max(step, MIN_WIDTH), MAX_WIDTH)                   # clip
+    return history
 
 
 @dataclass
@@ -95,7 +164,8 @@ class FuzzyBasisNetwork:
 
     def train(self, current_a, position_m, target, epochs: int, rate: float,
               train_weights: bool = False) -> list[float]:
-        """Steepest descent (batch) on the relative MSE; returns the training RMSE per epoch."""
+        """Steepest descent (batch) on the relative MSE; returns the training RMSE per epoch.  The slow,
+        obvious twin of ``train_on`` (numpy, one epoch at a time)."""
         return self.train_at(distances(normalise(current_a, position_m).reshape(-1, 2)), target, epochs, rate,
                              train_weights)
 
@@ -118,6 +188,15 @@ class FuzzyBasisNetwork:
                 self.weights = self.weights - rate * grad_w * scale
             self.widths = np.minimum(np.maximum(self.widths - rate * grad_sigma, MIN_WIDTH), MAX_WIDTH)   # clip
         return history
+
+    def train_on(self, layout: MembershipLayout, target, epochs: int, rate: float,
+                 train_weights: bool = False) -> list[float]:
+        """``train`` at the points of ``layout`` (``membership_layout``), compiled (``train_widths``)."""
+        target = np.ascontiguousarray(target, float).ravel()
+        self.weights, self.widths = self.weights.astype(float), self.widths.astype(float)   # fresh: trained in place
+        history = train_widths(layout, target, self.weights, self.widths, int(epochs), float(rate),
+                               bool(train_weights), max(float(np.var(target)), 1e-300))
+        return history.tolist()
 
     def copy(self) -> FuzzyBasisNetwork:
         return FuzzyBasisNetwork(self.weights.copy(), self.widths.copy())
@@ -164,6 +243,13 @@ def grid_distances(n: int) -> np.ndarray:
     return d2
 
 
+@lru_cache(maxsize=4)
+def grid_layout(n: int) -> MembershipLayout:
+    """``membership_layout`` of the n×n grid (``training_grid``), computed once (the live view trains
+    on it at every frame)."""
+    return membership_layout(*training_grid(n))
+
+
 @dataclass
 class TrainedPair:
     """The two networks (k_i [N/A], k_s [N/m]) and their RMSE histories."""
@@ -185,8 +271,9 @@ def stiffness_networks(ki_table: np.ndarray, ks_table: np.ndarray, ki_train: np.
     ki = FuzzyBasisNetwork.from_table(ki_table, initial_width)
     ks = FuzzyBasisNetwork.from_table(ks_table, initial_width)
     before = (ki.copy(), ks.copy())
-    ki_history = ki.train(currents, positions, ki_train, epochs, rate, train_weights)
-    ks_history = ks.train(currents, positions, ks_train, epochs, rate, train_weights)
+    layout = membership_layout(currents, positions)
+    ki_history = ki.train_on(layout, ki_train, epochs, rate, train_weights)
+    ks_history = ks.train_on(layout, ks_train, epochs, rate, train_weights)
     return TrainedPair(ki, ks, *before, ki_history, ks_history)
 
 
@@ -213,9 +300,9 @@ class LiveTraining:
         """``epochs`` more steps of steepest descent on both networks."""
         if epochs <= 0:
             return
-        d2 = grid_distances(TRAINING_POINTS)
-        self.ki.train_at(d2, self.targets[0], epochs, self.rate, self.train_weights)
-        self.ks.train_at(d2, self.targets[1], epochs, self.rate, self.train_weights)
+        layout = grid_layout(TRAINING_POINTS)
+        self.ki.train_on(layout, self.targets[0], epochs, self.rate, self.train_weights)
+        self.ks.train_on(layout, self.targets[1], epochs, self.rate, self.train_weights)
         self.epoch += int(epochs)
 
     def advance_to(self, epoch: int) -> None:

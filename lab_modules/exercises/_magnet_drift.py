@@ -24,7 +24,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from lab_modules.estimators.adaline import miso_run, siso_step
+from lab_modules.estimators.adaline import miso_run, siso_run
 from lab_modules.estimators.filter_consistency import (
     ConsistencyTest,
     integrated_autocorrelation_time,
@@ -148,10 +148,8 @@ def identifier_errors(traces: list[np.ndarray], values: dict, start_s: float, se
         force = trace[:, COLUMN["magnet_force_n"]]
         sensed = force + values["force_sensor_noise_n"] * rng.standard_normal(force.size)
         phi = force_shape(current, x_hat, gap, bias) * 1e-6                  # φ [A²/mm²]
-        k_hat, siso = K_NOMINAL_MM, np.empty(force.size)
-        for k in range(force.size):
-            siso[k] = k_hat * phi[k]                                         # a priori F̂ = k̂ φ
-            k_hat = siso_step(k_hat, phi[k], sensed[k], values["adaline_rate"])
+        siso = np.empty(force.size)
+        siso_run(K_NOMINAL_MM, phi, sensed, values["adaline_rate"], siso)   # a priori F̂ = k̂ φ
         weights = np.array([4 * K_NOMINAL_MM * bias / (gap * 1e3) ** 2,      # k_i = 4 k_M i0 / s0² [N/A]
                             4 * K_NOMINAL_MM * bias**2 / (gap * 1e3) ** 3])  # k_s = 4 k_M i0² / s0³ [N/mm]
         miso = np.empty((force.size, 3))

@@ -93,11 +93,17 @@ def node_points() -> tuple[np.ndarray, np.ndarray]:
     return currents.ravel(), positions.ravel()
 
 
+def _least_squares_values(key: tuple) -> dict:
+    """The least-squares settings (controls' names and values) of a ``network_key``."""
+    stencil_ma, stencil_um, fit, noise, seed = key[:5]
+    return {"stencil_current_ma": stencil_ma, "stencil_position_um": stencil_um, "fit": fit,
+            "force_noise_n": noise, "seed": seed}
+
+
 @lru_cache(maxsize=16)
 def _networks(key: tuple) -> TrainedPair:
-    stencil_ma, stencil_um, fit, noise, seed, epochs, rate, width, train_weights, training = key
-    values = {"stencil_current_ma": stencil_ma, "stencil_position_um": stencil_um, "fit": fit,
-              "force_noise_n": noise, "seed": seed}
+    epochs, rate, width, train_weights, training = key[5:]
+    values = _least_squares_values(key)
     ki, ks_mm = identified_tables(values)
     if training == TRAINING_DATA[1]:           # the nodes: their (noisy) table values are the targets
         inputs, ki_train, ks_train = node_points(), ki.ravel(), ks_mm.ravel() * N_PER_MM
@@ -127,3 +133,14 @@ def map_test_rmse(pair: TrainedPair, values: dict) -> dict[str, dict[str, float]
 def networks(values: dict) -> TrainedPair:
     """The trained pair for these settings (remembered: training takes about a second)."""
     return _networks(network_key(values))
+
+
+@lru_cache(maxsize=16)
+def _network_test_rmse(key: tuple) -> dict[str, dict[str, float]]:
+    return map_test_rmse(_networks(key), _least_squares_values(key))
+
+
+def network_test_rmse(values: dict) -> dict[str, dict[str, float]]:
+    """``map_test_rmse`` of the trained pair for these settings (remembered with it: the 41×41 grid's
+    exact factors and the bilinear table cost more than reading them)."""
+    return {name: dict(found) for name, found in _network_test_rmse(network_key(values)).items()}

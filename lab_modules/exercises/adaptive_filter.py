@@ -46,7 +46,7 @@ from lab_modules.exercises._stiffness_networks import (
     FBFNN_TRAINING,
     NETWORK_DEFAULTS,
     TRAINING_DATA,
-    map_test_rmse,
+    network_test_rmse,
     networks,
 )
 from lab_modules.loops.axial_bearing_loop import (
@@ -115,10 +115,10 @@ PARAMETERS = (
 )
 
 
-def fbfnn(values: dict):
-    """The networks of ``stiffness_map`` at its controls' defaults, trained with these epochs and rate."""
-    return networks({**NETWORK_DEFAULTS, "fbfnn_epochs": values["fbfnn_epochs"],
-                     "fbfnn_rate": values["fbfnn_rate"], "fbfnn_training": values["fbfnn_training"]})
+def network_values(values: dict) -> dict:
+    """The controls of the filters' networks (``networks``): stiffness_map's defaults, these epochs, rate, data."""
+    return {**NETWORK_DEFAULTS, "fbfnn_epochs": values["fbfnn_epochs"], "fbfnn_rate": values["fbfnn_rate"],
+            "fbfnn_training": values["fbfnn_training"]}
 
 
 def setup(values: dict) -> LoopSetup:
@@ -127,7 +127,7 @@ def setup(values: dict) -> LoopSetup:
     si = in_si(PARAMETERS, values)
     x1, x2 = si["point1_position_mm"], si["point2_position_mm"]
     load1, load2 = weight - values["point1_force_n"], weight - values["point2_force_n"]
-    pair = fbfnn(values)
+    pair = networks(network_values(values))
     return LoopSetup(
         segments=(Segment(0.0, 0.0, 0.0), Segment(0.05, x1, 0.0), Segment(0.1, x1, load1),
                   Segment(0.3, 0.0, 0.0), Segment(0.35, x2, 0.0), Segment(0.4, x2, load2)),
@@ -325,8 +325,8 @@ def drift_metrics(values: dict) -> dict:
     tests = {name: {f: {test.name: {"mean": test.mean, "lower": test.lower, "upper": test.upper,
                                     "inside": test.inside} for test in pair} for f, pair in per_filter.items()}
              for name, per_filter in found["consistency"].items()}
-    rmse = map_test_rmse(fbfnn(values), NETWORK_DEFAULTS)
-    nodes = map_test_rmse(fbfnn({**values, "fbfnn_training": TRAINING_DATA[1]}), NETWORK_DEFAULTS)
+    rmse = network_test_rmse(network_values(values))
+    nodes = network_test_rmse(network_values({**values, "fbfnn_training": TRAINING_DATA[1]}))
     return {"force_bias_n": found["windows"], "time_to_10pct_ms": found["time_to_10pct_ms"],
             "stated_time_ms": found["stated_ms"], "time_over_stated": found["time_to_10pct_ms"] / found["stated_ms"],
             "adaptive_over_offline_point1": abs(point1["adaptive"]) / abs(point1["offline"]),
@@ -470,7 +470,7 @@ class AdaptiveFilter(Exercise):
             readouts.append((f"x̂ RMS error, {LABELS[f]}", stats[f]["position_rms_both_um"], "µm"))
         readouts.append(("x̂ RMS ratio scheduled / fixed",
                          stats["fbfnn"]["position_rms_both_um"] / stats["fixed"]["position_rms_both_um"], ""))
-        rmse = map_test_rmse(fbfnn(values), NETWORK_DEFAULTS)
+        rmse = network_test_rmse(network_values(values))
         readouts += [(f"{name} test RMSE (41×41), {how}", rmse[name][key], unit) for name, unit in
                      (("k_i", "N/A"), ("k_s", "N/mm")) for key, how in
                      (("fbfnn", f"FBFNN on {values['fbfnn_training']}"), ("bilinear", "bilinear table of the 25 nodes"))]

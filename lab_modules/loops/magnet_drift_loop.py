@@ -161,12 +161,13 @@ NEES_STATES = 3              # x, v, F_St: the sensor state x_M is left out (mod
 
 
 @njit(cache=True, nogil=True)
-def normalised_errors(z, P, truth):
+def normalised_errors(z, P, truth, M):
     """NEES eᵀ P⁻¹ e of the a-posteriori estimate ``z`` against ``truth`` over the first ``NEES_STATES``
     states (x, v, F_St) with their block of P [-]: P⁻¹ e by Gaussian elimination with partial
-    pivoting (as LAPACK's solver; on a 3×3 the call itself would cost more than the sum)."""
+    pivoting (as LAPACK's solver; on a 3×3 the call itself would cost more than the sum).  ``M``
+    (``NEES_STATES`` × ``NEES_STATES`` + 1) is scratch: the loop calls this four times a sample, and
+    an allocation each time would cost more than the elimination."""
     n = NEES_STATES
-    M = np.empty((n, n + 1))                      # [P block | e], reduced in place
     for r in range(n):
         for c in range(n):
             M[r, c] = P[r, c]
@@ -216,6 +217,7 @@ def run(n_steps, state, physics, schedule, pid, filters, networks, adaptation, n
     model_matrices(4 * k0 * bias / gap**2, 4 * k0 * bias**2 / gap**3, physics, A_fixed, B_fixed)   # eq. 4-5
     process_noise(physics, B_fixed, Q_fixed)
     truth = np.zeros(N_STATES)
+    elimination = np.empty((NEES_STATES, NEES_STATES + 1))   # [P block | e], reduced in place
     kp, ti, kd = pid.proportional_a_per_m, pid.integral_time_s, pid.derivative_a_s_per_m
     tf, tr, i_ff = pid.derivative_filter_s, pid.reference_filter_s, pid.feedforward_a
     feedback = -1 if pid.feedback < 0 else FEEDBACK
@@ -230,10 +232,10 @@ def run(n_steps, state, physics, schedule, pid, filters, networks, adaptation, n
         row = out[k]
         truth[0], truth[1], truth[2], truth[3] = x, v, load, xm
         for f in range(N_FILTERS):
-            innovation_variance = filter_P[f][3, 3] + R                  # S = H P⁻ Hᵀ + R
-            row[FIRST_FILTER_COLUMN + 5 * f + 4] = (y - filter_z[f][3]) ** 2 / innovation_variance   # NIS
+            innovation_variance = filter_P[f, 3, 3] + R                  # S = H P⁻ Hᵀ + R
+            row[FIRST_FILTER_COLUMN + 5 * f + 4] = (y - filter_z[f, 3]) ** 2 / innovation_variance   # NIS
             correct(filter_z[f], filter_P[f], y, R)
-            row[FIRST_FILTER_COLUMN + 5 * f + 3] = normalised_errors(filter_z[f], filter_P[f], truth)
+            row[FIRST_FILTER_COLUMN + 5 * f + 3] = normalised_errors(filter_z[f], filter_P[f], truth, elimination)
         # PID on the measured position or the adaptive filter's estimate (Fig. 8)
         state[S_REF] += (reference - state[S_REF]) * T / tr
         if feedback < 0:
@@ -241,7 +243,7 @@ def run(n_steps, state, physics, schedule, pid, filters, networks, adaptation, n
             derivative = 0.0 if t == 0.0 else (tf * state[S_DERIV] + (x_meas - state[S_PREV_MEAS])) / (tf + T)
             state[S_DERIV], state[S_PREV_MEAS] = derivative, x_meas
         else:
-            position, derivative = filter_z[feedback][0], filter_z[feedback][1]
+            position, derivative = filter_z[feedback, 0], filter_z[feedback, 1]
         error = state[S_REF] - position
         state[S_INTEGRAL] += error * T
         command = i_ff + kp * (error + state[S_INTEGRAL] / ti) - kd * derivative
@@ -251,12 +253,12 @@ def run(n_steps, state, physics, schedule, pid, filters, networks, adaptation, n
         current = min(max(command + noise[k, 1], -bias), bias)
         force_true = magnet_force(current, x, k_magnet, gap, bias)
         # ADALINE on the adaptive filter's force estimate (or a force sensor), paper units
-        x_adaptive = filter_z[2][0]
+        x_adaptive = filter_z[2, 0]
         ki_fbfnn = evaluate(command, x_adaptive, centres, ki_w, ki_s)
         ks_fbfnn = evaluate(command, x_adaptive, centres, ks_w, ks_s)
         if target_mode == 0:                                             # F̂_M, the adaptive filter's
             force_target = state[S_ADALINE] / k0_mm * (ki_fbfnn * command + ks_fbfnn * x_adaptive) \
-                + filter_z[2][2] - load
+                + filter_z[2, 2] - load
         else:
             force_target = force_true + noise[k, 2]
         phi_mm = force_shape(command, x_adaptive, gap, bias) * 1e-6     # φ [A²/mm²]
@@ -266,12 +268,12 @@ def run(n_steps, state, physics, schedule, pid, filters, networks, adaptation, n
         row[5], row[6], row[7] = force_true, k_magnet * 1e6, state[S_ADALINE]
         for f in range(N_FILTERS):
             base = FIRST_FILTER_COLUMN + 5 * f
-            row[base] = filter_z[f][2] - load
-            row[base + 1] = np.sqrt(max(filter_P[f][2, 2], 0.0))
-            row[base + 2] = filter_z[f][0] - x
+            row[base] = filter_z[f, 2] - load
+            row[base + 1] = np.sqrt(max(filter_P[f, 2, 2], 0.0))
+            row[base + 2] = filter_z[f, 0] - x
         # predictions with the commanded current
         predict_linear(filter_z[0], filter_P[0], A_fixed, B_fixed, Q_fixed, command)
-        x_offline = filter_z[1][0]
+        x_offline = filter_z[1, 0]
         ki_o = evaluate(command, x_offline, centres, ki_w, ki_s)
         ks_o = evaluate(command, x_offline, centres, ks_w, ks_s)
         tki, tks = tangent_factors(command, x_offline, k0, gap, bias)
