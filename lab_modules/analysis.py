@@ -54,17 +54,41 @@ _kalman_lock = threading.Lock()
 
 
 @dataclass(frozen=True)
+class Matrices:
+    """A discrete system's matrices and sample time [s]: all that the analyses below read of a
+    ``control.StateSpace``, without its construction (the trade-off sweeps assemble hundreds)."""
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    dt: float
+
+
+@dataclass(frozen=True)
 class Loop:
     """A closed bearing-axis loop and where its parts sit in the state vector."""
 
-    system: control.StateSpace   # inputs LOOP_INPUTS, outputs LOOP_OUTPUTS
-    loop_states: slice           # states that take part in the feedback loop
+    system: control.StateSpace | Matrices   # inputs LOOP_INPUTS, outputs LOOP_OUTPUTS
+    loop_states: slice                      # states that take part in the feedback loop
 
 
 def closed_loop(model: control.StateSpace, controller: control.StateSpace,
                 kalman_gain: np.ndarray, use_estimate: bool,
                 state_gain: np.ndarray | None = None) -> Loop:
-    """Assemble plant, controller and steady-state filter into one discrete system.
+    """``closed_loop_matrices`` as a python-control system (named inputs and outputs)."""
+    loop = closed_loop_matrices(model, controller, kalman_gain, use_estimate, state_gain)
+    return Loop(_state_space(loop.system), loop.loop_states)
+
+
+def _state_space(system: Matrices) -> control.StateSpace:
+    return control.ss(system.A, system.B, system.C, system.D, system.dt, inputs=LOOP_INPUTS, outputs=LOOP_OUTPUTS)
+
+
+def closed_loop_matrices(model: control.StateSpace, controller: control.StateSpace | Matrices,
+                         kalman_gain: np.ndarray, use_estimate: bool,
+                         state_gain: np.ndarray | None = None) -> Loop:
+    """Assemble plant, controller and steady-state filter into one discrete system (``Matrices``).
 
     State z = (plant s, controller x_c, filter prediction x_p).  With
     y = C s + eta and x_hat = x_p + K (y - C x_p), the fed-back position is
@@ -126,8 +150,7 @@ def closed_loop(model: control.StateSpace, controller: control.StateSpace,
     Ccl = np.vstack([x_row, u_row, current_row])
     Dcl = np.zeros((3, Bcl.shape[1]))
     Dcl[1] = np.hstack([Dc[0] * k_mx, [0.0, 0.0, 0.0], Un[0]])
-    system = control.ss(Acl, Bcl, Ccl, Dcl, model.dt,
-                        inputs=LOOP_INPUTS, outputs=LOOP_OUTPUTS)
+    system = Matrices(Acl, Bcl, Ccl, Dcl, model.dt)
     filter_in_loop = use_estimate or state_gain is not None
     loop_states = slice(0, 2 * n + nc) if filter_in_loop else slice(0, n + nc)
     return Loop(system, loop_states)
@@ -139,7 +162,7 @@ def with_reference_filter(loop: Loop, reference_filter: control.StateSpace) -> L
 
     The filter's states are appended after the loop's and stay out of
     ``loop_states``: they are outside the feedback, so they add no loop poles
-    (the filter is stable by construction)."""
+    (the filter is stable by construction).  The system stays of the loop's kind."""
     sys, F = loop.system, reference_filter
     A, B, C, D = (np.asarray(M, dtype=float) for M in (sys.A, sys.B, sys.C, sys.D))
     Af, Bf, Cf, Df = (np.atleast_2d(np.asarray(M, dtype=float)) for M in (F.A, F.B, F.C, F.D))
@@ -151,8 +174,8 @@ def with_reference_filter(loop: Loop, reference_filter: control.StateSpace) -> L
     C_new = np.hstack([C, d_r @ Cf])
     D_new = D.copy()
     D_new[:, j:j + 1] = d_r @ Df
-    system = control.ss(A_new, B_new, C_new, D_new, sys.dt, inputs=LOOP_INPUTS, outputs=LOOP_OUTPUTS)
-    return Loop(system, loop.loop_states)
+    system = Matrices(A_new, B_new, C_new, D_new, sys.dt)
+    return Loop(system if isinstance(sys, Matrices) else _state_space(system), loop.loop_states)
 
 
 def loop_poles(loop: Loop) -> np.ndarray:
@@ -245,13 +268,23 @@ def step_response(loop: Loop, input_name: str, n_samples: int) -> np.ndarray:
 def frequency_gain(loop: Loop, input_name: str, output_name: str, frequencies_hz) -> np.ndarray:
     """|G(exp(j 2 pi f T))| of one input-output channel (as python-control's
     ``frequency_response``, by one batched solve of (zI - A) x = b)."""
+    return _channel_gain(loop, input_name, output_name)(frequencies_hz)
+
+
+def _channel_gain(loop: Loop, input_name: str, output_name: str):
+    """``frequency_gain`` of one channel as a function of the frequencies [Hz]: the matrices are
+    read once for the many single-frequency calls of ``peak_gain``'s search."""
     sys = loop.system
     j, i = LOOP_INPUTS.index(input_name), LOOP_OUTPUTS.index(output_name)
     A, B, C, D = (np.asarray(M, dtype=float) for M in (sys.A, sys.B, sys.C, sys.D))
-    z = np.exp(2j * np.pi * np.asarray(frequencies_hz, dtype=float) * sys.dt)
     n = A.shape[0]
-    x = np.linalg.solve(z[:, None, None] * np.eye(n) - A, np.broadcast_to(B[:, j], (z.size, n))[..., None])
-    return np.abs(x[..., 0] @ C[i] + D[i, j])
+    identity, b, c, d = np.eye(n), B[:, j], C[i], D[i, j]
+
+    def gain(frequencies_hz) -> np.ndarray:
+        z = np.exp(2j * np.pi * np.asarray(frequencies_hz, dtype=float) * sys.dt)
+        x = np.linalg.solve(z[:, None, None] * identity - A, np.broadcast_to(b, (z.size, n))[..., None])
+        return np.abs(x[..., 0] @ c + d)
+    return gain
 
 
 def peak_gain(loop: Loop, input_name: str, output_name: str, lowest_hz: float = 0.5,
@@ -259,12 +292,13 @@ def peak_gain(loop: Loop, input_name: str, output_name: str, lowest_hz: float = 
     """Largest |G| of one channel between ``lowest_hz`` and the Nyquist
     frequency, and where it occurs [Hz]: a log-spaced grid, then a bounded
     search between the grid neighbours of the largest value."""
+    channel_gain = _channel_gain(loop, input_name, output_name)
     f = np.geomspace(lowest_hz, 0.5 / loop.system.dt, points)
-    gain = frequency_gain(loop, input_name, output_name, f)
+    gain = channel_gain(f)
     k = int(np.argmax(gain))
     bounds = np.log(f[max(k - 1, 0)]), np.log(f[min(k + 1, f.size - 1)])
     found = scipy.optimize.minimize_scalar(
-        lambda log_f: -frequency_gain(loop, input_name, output_name, [np.exp(log_f)])[0],
+        lambda log_f: -channel_gain([np.exp(log_f)])[0],
         bounds=bounds, method="bounded", options={"xatol": 1e-5})
     if -found.fun > gain[k]:
         return float(-found.fun), float(np.exp(found.x))

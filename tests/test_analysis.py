@@ -245,3 +245,20 @@ def test_reference_filter_changes_only_the_reference_channel():
         theirs = control.frequency_response(channel, omega).complex
         np.testing.assert_allclose(np.asarray(ours), np.asarray(theirs), rtol=1e-7, atol=1e-18)
     assert pole_distance(analysis.loop_poles(filtered), analysis.loop_poles(loop)) <= 1e-12
+
+
+@pytest.mark.parametrize("use_estimate", [False, True])
+def test_closed_loop_matrices_are_the_python_control_loop(use_estimate):
+    """``closed_loop_matrices`` (the sweeps' loops) holds the very matrices of ``closed_loop``, and
+    ``with_reference_filter`` keeps each kind, with the same matrices."""
+    axis = kalman_noise_setup(use_estimate=use_estimate)
+    arguments = (axis.model, axis.controller, axis.steady_state_filter[0], use_estimate)
+    light, full = analysis.closed_loop_matrices(*arguments), analysis.closed_loop(*arguments)
+    prefilter = pid_setpoint_filter(50e-3, 3e-3, 0.3e-3, T)
+    light_filtered, full_filtered = (analysis.with_reference_filter(loop, prefilter) for loop in (light, full))
+    assert isinstance(light_filtered.system, analysis.Matrices)
+    assert isinstance(full_filtered.system, control.StateSpace)
+    for a, b in ((light, full), (light_filtered, full_filtered)):
+        assert a.loop_states == b.loop_states and a.system.dt == b.system.dt
+        for name in "ABCD":
+            assert np.array_equal(getattr(a.system, name), np.asarray(getattr(b.system, name)))

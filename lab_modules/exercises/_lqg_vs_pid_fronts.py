@@ -80,7 +80,7 @@ PID_FRONT_SETTINGS = (*_SHARED_FRONT_SETTINGS, "pid_feedback", "pid_gain", "inte
                       "derivative_time_ms", "derivative_filter_us")
 
 
-def _linear_common(names: tuple[str, ...], key: tuple) -> tuple[dict, AxisSetup]:
+def linear_common(names: tuple[str, ...], key: tuple) -> tuple[dict, AxisSetup]:
     """Slider values (the front's settings, the rest neutral) and the shared set-up
     on the linear plant, its filter solved once for every design of the sweep."""
     values = dict(zip(names, key))
@@ -93,7 +93,7 @@ def _linear_common(names: tuple[str, ...], key: tuple) -> tuple[dict, AxisSetup]
 
 @lru_cache(maxsize=16)
 def _lqg_front(key: tuple) -> Designs:
-    values, common = _linear_common(LQG_FRONT_SETTINGS, key)
+    values, common = linear_common(LQG_FRONT_SETTINGS, key)
     rows = []
     for factor_xv in FRONT_LQG_FACTORS:
         for factor_integral in FRONT_LQG_FACTORS:
@@ -104,19 +104,23 @@ def _lqg_front(key: tuple) -> Designs:
 
 @lru_cache(maxsize=16)
 def _pid_front(key: tuple) -> Designs:
-    values, common = _linear_common(PID_FRONT_SETTINGS, key)
+    values, common = linear_common(PID_FRONT_SETTINGS, key)
     rows = []
     ratio = derivative_filter_ratio(values)
     integral_time_s = in_si(SET_UP_CONTROLS, values)["integral_time_ms"]
+    use_estimate, kalman_gain = values["pid_feedback"] == "estimated", common.steady_state_filter[0]
     for derivative_time_s in FRONT_PID_DERIVATIVE_TIMES_S:
         at_slider_gain = pid(values["pid_gain"], integral_time_s,
                              derivative_time_s, ratio * derivative_time_s, T)
         prefilter = _setpoint_filter(integral_time_s, derivative_time_s, ratio * derivative_time_s)
+        A_c, B_c, C_c, D_c = (np.asarray(M, dtype=float) for M in
+                              (at_slider_gain.A, at_slider_gain.B, at_slider_gain.C, at_slider_gain.D))
         for factor in FRONT_PID_GAIN_FACTORS:
-            axis = common.with_changes(controller=factor * at_slider_gain,
-                                       use_estimate=values["pid_feedback"] == "estimated")
-            loop = axis.loop()                  # built once: the I-PD is this loop with the prefilter
-            row = loop_figures(axis, loop)
+            # factor * C(z) scales B_c and D_c (as python-control does): the same loop as
+            # common.with_changes(controller=factor * at_slider_gain).loop(), without its objects
+            controller = analysis.Matrices(A_c, factor * B_c, C_c, factor * D_c, T)
+            loop = analysis.closed_loop_matrices(common.model, controller, kalman_gain, use_estimate)
+            row = loop_figures(common, loop)    # the noise is common's; the I-PD is this loop, prefiltered
             if row["min_damping"] > 0:
                 ipd = analysis.with_reference_filter(loop, prefilter)
                 current = analysis.step_response(ipd, "reference_m", round(LINEAR_WINDOW_S / T))
