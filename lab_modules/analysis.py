@@ -254,6 +254,44 @@ def _unit_step_outputs(A, b, C, d, n_samples):
     return y
 
 
+@numba.njit(cache=True, nogil=True)
+def _unit_step_outputs_of_two(A, B, C, D, n_samples):
+    """``_unit_step_outputs`` for the two columns of B (n, 2) and D (n_out, 2) at once, each
+    sum in the same order, so each response is the same to the last bit: rows (k) of
+    y[j, k] = C x_jk + D[:, j].  Two rows of A times two state vectors per pass over the
+    columns: four independent sums side by side, where one after another waits on each addition."""
+    n, n_out = A.shape[0], C.shape[0]
+    x, work = np.zeros((2, n)), np.zeros((2, n))
+    y = np.empty((2, n_samples, n_out))
+    for k in range(n_samples):
+        for r in range(n_out):
+            first, second = D[r, 0], D[r, 1]
+            for c in range(n):
+                first += C[r, c] * x[0, c]
+                second += C[r, c] * x[1, c]
+            y[0, k, r], y[1, k, r] = first, second
+        r = 0
+        while r < n:
+            if r + 1 < n:                       # rows r and r + 1
+                first_r, first_next, second_r, second_next = B[r, 0], B[r + 1, 0], B[r, 1], B[r + 1, 1]
+                for c in range(n):
+                    first_r += A[r, c] * x[0, c]
+                    first_next += A[r + 1, c] * x[0, c]
+                    second_r += A[r, c] * x[1, c]
+                    second_next += A[r + 1, c] * x[1, c]
+                work[0, r], work[0, r + 1], work[1, r], work[1, r + 1] = first_r, first_next, second_r, second_next
+                r += 2
+            else:                               # the last row of an odd n
+                first_r, second_r = B[r, 0], B[r, 1]
+                for c in range(n):
+                    first_r += A[r, c] * x[0, c]
+                    second_r += A[r, c] * x[1, c]
+                work[0, r], work[1, r] = first_r, second_r
+                r += 1
+        x[:, :] = work
+    return y
+
+
 def step_response(loop: Loop, input_name: str, n_samples: int) -> np.ndarray:
     """Response of every loop output (``LOOP_OUTPUTS``, columns) to a unit step
     on one input at sample 0, from rest: rows k = 0 ... n_samples - 1 (what
@@ -263,6 +301,17 @@ def step_response(loop: Loop, input_name: str, n_samples: int) -> np.ndarray:
     j = LOOP_INPUTS.index(input_name)
     A, B, C, D = (np.ascontiguousarray(np.asarray(M, dtype=float)) for M in (sys.A, sys.B, sys.C, sys.D))
     return _unit_step_outputs(A, np.ascontiguousarray(B[:, j]), C, np.ascontiguousarray(D[:, j]), n_samples)
+
+
+def step_responses(loop: Loop, input_names: tuple[str, str], n_samples: int) -> tuple[np.ndarray, np.ndarray]:
+    """``step_response`` to each of two inputs, the same to the last bit, in one compiled pass
+    (two thirds of the time of two: ``linear_figures`` wants the force and the reference step)."""
+    sys = loop.system
+    columns = [LOOP_INPUTS.index(name) for name in input_names]
+    A, B, C, D = (np.ascontiguousarray(np.asarray(M, dtype=float)) for M in (sys.A, sys.B, sys.C, sys.D))
+    y = _unit_step_outputs_of_two(A, np.ascontiguousarray(B[:, columns]), C, np.ascontiguousarray(D[:, columns]),
+                                  n_samples)
+    return y[0], y[1]
 
 
 def frequency_gain(loop: Loop, input_name: str, output_name: str, frequencies_hz) -> np.ndarray:

@@ -262,3 +262,37 @@ def test_closed_loop_matrices_are_the_python_control_loop(use_estimate):
         assert a.loop_states == b.loop_states and a.system.dt == b.system.dt
         for name in "ABCD":
             assert np.array_equal(getattr(a.system, name), np.asarray(getattr(b.system, name)))
+
+
+def unit_step_outputs_twin(A, b, C, d, n_samples):
+    """The plain twin of the compiled step recursions: y_k = C x_k + d, x_{k+1} = A x_k + b from x_0 = 0,
+    each sum taken left to right from d_r or b_r (the order the kernels keep)."""
+    def sum_from(start, terms):
+        for term in terms:
+            start += term
+        return start
+    x, y = np.zeros(A.shape[0]), np.empty((n_samples, C.shape[0]))
+    for k in range(n_samples):
+        y[k] = [sum_from(d[r], C[r] * x) for r in range(C.shape[0])]
+        x = np.array([sum_from(b[r], A[r] * x) for r in range(A.shape[0])])
+    return y
+
+
+@pytest.mark.parametrize("prefiltered", [False, True])
+@pytest.mark.parametrize("use_estimate", [False, True])
+def test_compiled_step_responses_equal_their_plain_twin_to_the_last_bit(use_estimate, prefiltered):
+    """``step_response`` and ``step_responses`` (two inputs in one pass) = the plain recursion, bit for
+    bit, on loops with an even and an odd number of states (the paired kernel's last row)."""
+    loop = kalman_noise_setup(use_estimate=use_estimate).loop()
+    if prefiltered:                     # a first-order reference filter: one state more, an odd number
+        loop = analysis.with_reference_filter(loop, control.ss([[0.5]], [[0.5]], [[1.0]], [[0.0]], T))
+    A, B, C, D = (np.asarray(M, dtype=float) for M in (loop.system.A, loop.system.B, loop.system.C, loop.system.D))
+    assert A.shape[0] % 2 == int(prefiltered)
+    n = 300
+    names = ("disturbance_n", "reference_m")
+    twins = [unit_step_outputs_twin(A, B[:, j], C, D[:, j], n) for j in map(analysis.LOOP_INPUTS.index, names)]
+    assert np.max(np.abs(twins[1])) > 0 and np.max(np.abs(twins[0])) > 0
+    for ours, twin in zip(analysis.step_responses(loop, names, n), twins):
+        assert np.array_equal(ours, twin)
+    for name, twin in zip(names, twins):
+        assert np.array_equal(analysis.step_response(loop, name, n), twin)

@@ -137,8 +137,8 @@ def linear_figures(loop: analysis.Loop) -> dict[str, float]:
                 "peak_current_a_per_m": nan, "settling_time_s": nan, "min_damping": damping}
     n = round(LINEAR_WINDOW_S / T)
     x_index, i_index = analysis.LOOP_OUTPUTS.index("x_m"), analysis.LOOP_OUTPUTS.index("current_a")
-    force = analysis.step_response(loop, "disturbance_n", n)[:, x_index]
-    reference = analysis.step_response(loop, "reference_m", n)
+    force, reference = analysis.step_responses(loop, ("disturbance_n", "reference_m"), n)
+    force = force[:, x_index]
     x = reference[:, x_index]
     outside = np.flatnonzero(np.abs(x - 1.0) > SETTLING_BAND)
     compliance, frequency = analysis.peak_gain(loop, "disturbance_n", "x_m")
