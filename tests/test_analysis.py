@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.optimize import linear_sum_assignment
 
-from lab_modules import analysis
+from lab_modules import analysis, loop_responses
 from lab_modules.controllers.pid import pid
 from lab_modules.controllers.pid import setpoint_filter as pid_setpoint_filter
 from lab_modules.exercises.kalman_noise import EXERCISE, setup
@@ -186,11 +186,11 @@ def test_noise_spectrum_integrates_to_the_lyapunov_variance(use_estimate):
 @pytest.mark.parametrize("use_estimate", [False, True])
 @pytest.mark.parametrize("input_name", ["reference_m", "disturbance_n"])
 def test_compiled_step_response_equals_python_control(use_estimate, input_name):
-    """``analysis.step_response`` (compiled recursion) = python-control's
+    """``loop_responses.step_response`` (compiled recursion) = python-control's
     ``step_response`` of the same loop, every output, to 1e-9 of its peak."""
     loop = kalman_noise_setup(use_estimate=use_estimate).loop()
     n = 2000
-    ours = analysis.step_response(loop, input_name, n)
+    ours = loop_responses.step_response(loop, input_name, n)
     j = analysis.LOOP_INPUTS.index(input_name)
     theirs = control.step_response(loop.system[:, j], T=np.arange(n) * T).outputs   # (outputs, time)
     theirs = np.asarray(theirs).reshape(len(analysis.LOOP_OUTPUTS), n).T
@@ -201,16 +201,16 @@ def test_compiled_step_response_equals_python_control(use_estimate, input_name):
 
 @pytest.mark.parametrize("use_estimate", [False, True])
 def test_peak_gain_is_the_largest_frequency_response(use_estimate):
-    """``analysis.peak_gain`` of force -> position: not below python-control's
+    """``loop_responses.peak_gain`` of force -> position: not below python-control's
     magnitude anywhere on a dense grid (within 1e-6), and equal to it at the
     frequency it reports; ``frequency_gain`` = python-control to 1e-9."""
     loop = kalman_noise_setup(use_estimate=use_estimate).loop()
     grid = np.geomspace(0.5, 0.499 / T, 4000)
     j, i = analysis.LOOP_INPUTS.index("disturbance_n"), analysis.LOOP_OUTPUTS.index("x_m")
     reference = control.frequency_response(loop.system[i, j], 2 * np.pi * grid).magnitude.ravel()
-    ours = analysis.frequency_gain(loop, "disturbance_n", "x_m", grid)
+    ours = loop_responses.frequency_gain(loop, "disturbance_n", "x_m", grid)
     np.testing.assert_allclose(ours, reference, rtol=1e-9)
-    peak, at_hz = analysis.peak_gain(loop, "disturbance_n", "x_m")
+    peak, at_hz = loop_responses.peak_gain(loop, "disturbance_n", "x_m")
     assert peak >= reference.max() * (1 - 1e-6)
     there = control.frequency_response(loop.system[i, j], [2 * np.pi * at_hz]).magnitude.ravel()[0]
     assert there == pytest.approx(peak, rel=1e-9)
@@ -292,7 +292,7 @@ def test_compiled_step_responses_equal_their_plain_twin_to_the_last_bit(use_esti
     names = ("disturbance_n", "reference_m")
     twins = [unit_step_outputs_twin(A, B[:, j], C, D[:, j], n) for j in map(analysis.LOOP_INPUTS.index, names)]
     assert np.max(np.abs(twins[1])) > 0 and np.max(np.abs(twins[0])) > 0
-    for ours, twin in zip(analysis.step_responses(loop, names, n), twins):
+    for ours, twin in zip(loop_responses.step_responses(loop, names, n), twins):
         assert np.array_equal(ours, twin)
     for name, twin in zip(names, twins):
-        assert np.array_equal(analysis.step_response(loop, name, n), twin)
+        assert np.array_equal(loop_responses.step_response(loop, name, n), twin)

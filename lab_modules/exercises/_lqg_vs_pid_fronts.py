@@ -14,7 +14,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from lab_modules import analysis
+from lab_modules import analysis, loop_responses
 from lab_modules.controllers.lqr import PAPER_LQR_WEIGHTS, lqr
 from lab_modules.controllers.pid import pid, setpoint_filter
 from lab_modules.exercises import Plot
@@ -123,7 +123,7 @@ def _pid_front(key: tuple) -> Designs:
             row = loop_figures(common, loop)    # the noise is common's; the I-PD is this loop, prefiltered
             if row["min_damping"] > 0:
                 ipd = analysis.with_reference_filter(loop, prefilter)
-                current = analysis.step_response(ipd, "reference_m", round(LINEAR_WINDOW_S / T))
+                current = loop_responses.step_response(ipd, "reference_m", round(LINEAR_WINDOW_S / T))
                 row["peak_current_ipd_a_per_m"] = float(np.max(np.abs(
                     current[:, analysis.LOOP_OUTPUTS.index("current_a")])))
             rows.append(row)
