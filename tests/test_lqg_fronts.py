@@ -34,3 +34,17 @@ def test_pid_front_equals_designs_built_through_python_control(pid_feedback):
             assert designs.noise_rms_current_a[k] == row["noise_rms_current_a"]
             assert np.array_equal(designs.peak_current_a_per_m[k], row["peak_current_a_per_m"], equal_nan=True)
             assert designs.min_damping[k] == row["min_damping"]
+
+
+def test_pid_front_after_a_filter_move_reuses_the_sweeps_controllers(monkeypatch):
+    """Only the PID's sliders change the sweep's seven controllers: after a move of the filter's
+    weight the front is recomputed (other figures) without discretising a PID again."""
+    values = lqg_vs_pid.EXERCISE.resolve({})
+    before = fronts.pid_front(values)
+    moved = {**values, "filter_q_velocity": values["filter_q_velocity"] * 1.5}
+
+    def no_c2d(*_):
+        raise AssertionError("a PID discretised again")
+    monkeypatch.setattr(fronts, "pid", no_c2d)
+    after = fronts.pid_front(moved)
+    assert not np.array_equal(before.noise_rms_current_a, after.noise_rms_current_a, equal_nan=True)

@@ -110,14 +110,12 @@ def _pid_front(key: tuple) -> Designs:
     integral_time_s = in_si(SET_UP_CONTROLS, values)["integral_time_ms"]
     use_estimate, kalman_gain = values["pid_feedback"] == "estimated", common.steady_state_filter[0]
     for derivative_time_s in FRONT_PID_DERIVATIVE_TIMES_S:
-        at_slider_gain = pid(values["pid_gain"], integral_time_s,
-                             derivative_time_s, ratio * derivative_time_s, T)
+        at_slider_gain = _pid(values["pid_gain"], integral_time_s, derivative_time_s, ratio * derivative_time_s)
         prefilter = _setpoint_filter(integral_time_s, derivative_time_s, ratio * derivative_time_s)
-        A_c, B_c, C_c, D_c = (np.asarray(M, dtype=float) for M in
-                              (at_slider_gain.A, at_slider_gain.B, at_slider_gain.C, at_slider_gain.D))
+        A_c, B_c, C_c, D_c = at_slider_gain.A, at_slider_gain.B, at_slider_gain.C, at_slider_gain.D
         for factor in FRONT_PID_GAIN_FACTORS:
             # factor * C(z) scales B_c and D_c (as python-control does): the same loop as
-            # common.with_changes(controller=factor * at_slider_gain).loop(), without its objects
+            # common.with_changes(controller=factor * pid(...)).loop(), without its objects
             controller = analysis.Matrices(A_c, factor * B_c, C_c, factor * D_c, T)
             loop = analysis.closed_loop_matrices(common.model, controller, kalman_gain, use_estimate)
             row = loop_figures(common, loop)    # the noise is common's; the I-PD is this loop, prefiltered
@@ -128,6 +126,17 @@ def _pid_front(key: tuple) -> Designs:
                     current[:, analysis.LOOP_OUTPUTS.index("current_a")])))
             rows.append(row)
     return _designs(rows)
+
+
+@lru_cache(maxsize=64)
+def _pid(gain: float, integral_time_s: float, derivative_time_s: float, derivative_filter_s: float
+         ) -> analysis.Matrices:
+    """``controllers.pid.pid``'s matrices: a move of any slider but the PID's (the filter's, the
+    noise) reuses the sweep's seven (each a c2d through python-control, a tenth of the PID front's
+    time).  Shared: not to be modified."""
+    controller = pid(gain, integral_time_s, derivative_time_s, derivative_filter_s, T)
+    return analysis.Matrices(*(np.asarray(M, dtype=float) for M in (controller.A, controller.B, controller.C,
+                                                                     controller.D)), T)
 
 
 @lru_cache(maxsize=64)
