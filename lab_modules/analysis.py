@@ -1,6 +1,8 @@
 """Linear analysis of the bearing-axis loop: closed-loop poles, noise-driven
-RMS values, step responses, the frequency response's peak, where a loop affine in
-a gain factor loses stability and the largest tolerable gain factor.
+RMS values, where a loop affine in a gain factor loses stability and the largest
+tolerable gain factor, the loop broken at the plant input and the modes' names
+(step and frequency responses: ``loop_responses``; margins and sensitivity:
+``loop_sensitivity``).
 
 The loop is assembled from the discrete plant model (eq. 1, 3-4, 12), a
 discrete controller and the *steady-state* Kalman filter of eq. 2, and
@@ -15,7 +17,6 @@ import warnings
 from dataclasses import dataclass
 
 import control
-import numba
 import numpy as np
 import scipy.linalg
 import scipy.optimize
@@ -54,17 +55,41 @@ _kalman_lock = threading.Lock()
 
 
 @dataclass(frozen=True)
+class Matrices:
+    """A discrete system's matrices and sample time [s]: all that the analyses below read of a
+    ``control.StateSpace``, without its construction (the trade-off sweeps assemble hundreds)."""
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    dt: float
+
+
+@dataclass(frozen=True)
 class Loop:
     """A closed bearing-axis loop and where its parts sit in the state vector."""
 
-    system: control.StateSpace   # inputs LOOP_INPUTS, outputs LOOP_OUTPUTS
-    loop_states: slice           # states that take part in the feedback loop
+    system: control.StateSpace | Matrices   # inputs LOOP_INPUTS, outputs LOOP_OUTPUTS
+    loop_states: slice                      # states that take part in the feedback loop
 
 
 def closed_loop(model: control.StateSpace, controller: control.StateSpace,
                 kalman_gain: np.ndarray, use_estimate: bool,
                 state_gain: np.ndarray | None = None) -> Loop:
-    """Assemble plant, controller and steady-state filter into one discrete system.
+    """``closed_loop_matrices`` as a python-control system (named inputs and outputs)."""
+    loop = closed_loop_matrices(model, controller, kalman_gain, use_estimate, state_gain)
+    return Loop(_state_space(loop.system), loop.loop_states)
+
+
+def _state_space(system: Matrices) -> control.StateSpace:
+    return control.ss(system.A, system.B, system.C, system.D, system.dt, inputs=LOOP_INPUTS, outputs=LOOP_OUTPUTS)
+
+
+def closed_loop_matrices(model: control.StateSpace, controller: control.StateSpace | Matrices,
+                         kalman_gain: np.ndarray, use_estimate: bool,
+                         state_gain: np.ndarray | None = None) -> Loop:
+    """Assemble plant, controller and steady-state filter into one discrete system (``Matrices``).
 
     State z = (plant s, controller x_c, filter prediction x_p).  With
     y = C s + eta and x_hat = x_p + K (y - C x_p), the fed-back position is
@@ -126,8 +151,7 @@ def closed_loop(model: control.StateSpace, controller: control.StateSpace,
     Ccl = np.vstack([x_row, u_row, current_row])
     Dcl = np.zeros((3, Bcl.shape[1]))
     Dcl[1] = np.hstack([Dc[0] * k_mx, [0.0, 0.0, 0.0], Un[0]])
-    system = control.ss(Acl, Bcl, Ccl, Dcl, model.dt,
-                        inputs=LOOP_INPUTS, outputs=LOOP_OUTPUTS)
+    system = Matrices(Acl, Bcl, Ccl, Dcl, model.dt)
     filter_in_loop = use_estimate or state_gain is not None
     loop_states = slice(0, 2 * n + nc) if filter_in_loop else slice(0, n + nc)
     return Loop(system, loop_states)
@@ -139,7 +163,7 @@ def with_reference_filter(loop: Loop, reference_filter: control.StateSpace) -> L
 
     The filter's states are appended after the loop's and stay out of
     ``loop_states``: they are outside the feedback, so they add no loop poles
-    (the filter is stable by construction)."""
+    (the filter is stable by construction).  The system stays of the loop's kind."""
     sys, F = loop.system, reference_filter
     A, B, C, D = (np.asarray(M, dtype=float) for M in (sys.A, sys.B, sys.C, sys.D))
     Af, Bf, Cf, Df = (np.atleast_2d(np.asarray(M, dtype=float)) for M in (F.A, F.B, F.C, F.D))
@@ -151,8 +175,8 @@ def with_reference_filter(loop: Loop, reference_filter: control.StateSpace) -> L
     C_new = np.hstack([C, d_r @ Cf])
     D_new = D.copy()
     D_new[:, j:j + 1] = d_r @ Df
-    system = control.ss(A_new, B_new, C_new, D_new, sys.dt, inputs=LOOP_INPUTS, outputs=LOOP_OUTPUTS)
-    return Loop(system, loop.loop_states)
+    system = Matrices(A_new, B_new, C_new, D_new, sys.dt)
+    return Loop(system if isinstance(sys, Matrices) else _state_space(system), loop.loop_states)
 
 
 def loop_poles(loop: Loop) -> np.ndarray:
@@ -208,67 +232,6 @@ def noise_spectrum(loop: Loop, input_variances: dict[str, float], frequencies_hz
     response = np.asarray(control.frequency_response(channels, omega, squeeze=False).complex)[0]   # (inputs, f)
     variances = np.array(list(input_variances.values()))
     return np.sqrt(np.sum(np.abs(response) ** 2 * (2.0 * T * variances)[:, None], axis=0))
-
-
-@numba.njit(cache=True, nogil=True)
-def _unit_step_outputs(A, b, C, d, n_samples):
-    """Outputs y_k = C x_k + d of x_{k+1} = A x_k + b, x_0 = 0 (a unit step at k = 0)."""
-    n, n_out = A.shape[0], C.shape[0]
-    x, work = np.zeros(n), np.zeros(n)
-    y = np.empty((n_samples, n_out))
-    for k in range(n_samples):
-        for r in range(n_out):
-            acc = d[r]
-            for c in range(n):
-                acc += C[r, c] * x[c]
-            y[k, r] = acc
-        for r in range(n):
-            acc = b[r]
-            for c in range(n):
-                acc += A[r, c] * x[c]
-            work[r] = acc
-        x[:] = work
-    return y
-
-
-def step_response(loop: Loop, input_name: str, n_samples: int) -> np.ndarray:
-    """Response of every loop output (``LOOP_OUTPUTS``, columns) to a unit step
-    on one input at sample 0, from rest: rows k = 0 ... n_samples - 1 (what
-    python-control's ``step_response`` returns, compiled: the trade-off sweeps
-    need hundreds of them)."""
-    sys = loop.system
-    j = LOOP_INPUTS.index(input_name)
-    A, B, C, D = (np.ascontiguousarray(np.asarray(M, dtype=float)) for M in (sys.A, sys.B, sys.C, sys.D))
-    return _unit_step_outputs(A, np.ascontiguousarray(B[:, j]), C, np.ascontiguousarray(D[:, j]), n_samples)
-
-
-def frequency_gain(loop: Loop, input_name: str, output_name: str, frequencies_hz) -> np.ndarray:
-    """|G(exp(j 2 pi f T))| of one input-output channel (as python-control's
-    ``frequency_response``, by one batched solve of (zI - A) x = b)."""
-    sys = loop.system
-    j, i = LOOP_INPUTS.index(input_name), LOOP_OUTPUTS.index(output_name)
-    A, B, C, D = (np.asarray(M, dtype=float) for M in (sys.A, sys.B, sys.C, sys.D))
-    z = np.exp(2j * np.pi * np.asarray(frequencies_hz, dtype=float) * sys.dt)
-    n = A.shape[0]
-    x = np.linalg.solve(z[:, None, None] * np.eye(n) - A, np.broadcast_to(B[:, j], (z.size, n))[..., None])
-    return np.abs(x[..., 0] @ C[i] + D[i, j])
-
-
-def peak_gain(loop: Loop, input_name: str, output_name: str, lowest_hz: float = 0.5,
-              points: int = 200) -> tuple[float, float]:
-    """Largest |G| of one channel between ``lowest_hz`` and the Nyquist
-    frequency, and where it occurs [Hz]: a log-spaced grid, then a bounded
-    search between the grid neighbours of the largest value."""
-    f = np.geomspace(lowest_hz, 0.5 / loop.system.dt, points)
-    gain = frequency_gain(loop, input_name, output_name, f)
-    k = int(np.argmax(gain))
-    bounds = np.log(f[max(k - 1, 0)]), np.log(f[min(k + 1, f.size - 1)])
-    found = scipy.optimize.minimize_scalar(
-        lambda log_f: -frequency_gain(loop, input_name, output_name, [np.exp(log_f)])[0],
-        bounds=bounds, method="bounded", options={"xatol": 1e-5})
-    if -found.fun > gain[k]:
-        return float(-found.fun), float(np.exp(found.x))
-    return float(gain[k]), float(f[k])
 
 
 def stability_margins(A_low: np.ndarray, A_high: np.ndarray, low: float, high: float, factors,
@@ -370,9 +333,7 @@ def z_to_s(poles_z: np.ndarray, sample_time_s: float) -> np.ndarray:
     return np.log(np.asarray(poles_z, dtype=complex)) / sample_time_s
 
 
-# -- loop broken at the plant input: margins and sensitivity (ISO 14839-3) -------------------
-#: ISO 14839-3 zones by the peak of the sensitivity function |S|max (absolute value, not dB)
-ISO_14839_ZONES = (("A", 3.0), ("B", 4.0), ("C", 5.0), ("D", float("inf")))
+# -- loop broken at the plant input (margins and sensitivity: ``loop_sensitivity``) ----------
 
 
 def compensator(model: control.StateSpace, controller: control.StateSpace, kalman_gain: np.ndarray,
@@ -421,108 +382,6 @@ def state_space_from_step(step, n_states: int, n_inputs: int, dt: float) -> cont
     D = np.column_stack([c[1] for c in inputs])
     C = np.column_stack([c[1] for c in columns]) if n_states else np.zeros((D.shape[0], 0))
     return control.ss(A, B, C, D, dt)
-
-
-def iso_zone(peak: float) -> str:
-    """ISO 14839-3 zone of a sensitivity peak |S|max: A < 3, B < 4, C < 5, D above."""
-    return next(zone for zone, limit in ISO_14839_ZONES if peak < limit)
-
-
-@dataclass(frozen=True)
-class Margins:
-    """Stability margins of an open loop L (loop broken at the plant input) and the peak of
-    the sensitivity S = 1 / (1 + L).  An open-loop unstable plant (the magnetic bearing) is
-    stable only between two gains, so it has a gain margin upwards and one downwards."""
-
-    gain_margin: float            # gain factor that reaches instability upwards (inf: none)
-    gain_margin_down: float       # ... downwards (0: none)
-    phase_margin_deg: float       # smallest over the gain crossovers (inf: none)
-    gain_crossover_rad_s: float   # where |L| = 1 with the smallest phase margin (NaN: none)
-    sensitivity_peak: float       # |S|max
-    sensitivity_peak_rad_s: float
-    stable: bool                  # closed loop 1 / (1 + L) stable
-
-    @property
-    def zone(self) -> str:
-        return iso_zone(self.sensitivity_peak) if self.stable else "D"
-
-
-def frequency_grid(system, points: int = 800, low_rad_s: float = 1.0) -> np.ndarray:
-    """Log-spaced angular frequencies [rad/s] up to the Nyquist frequency of a discrete system
-    (or 1e5 rad/s for a continuous one)."""
-    high = np.pi / system.dt if system.dt else 1e5
-    return np.logspace(np.log10(low_rad_s), np.log10(0.999 * high), points)
-
-
-def open_loop_response(open_loop, omega) -> np.ndarray:
-    """L(jω) (or L(e^{jωT})) of a SISO system on ``omega`` [rad/s]: for a state space one batched
-    solve of (zI - A) x = B (what python-control's ``frequency_response`` returns, without its
-    per-call overhead: the margin search evaluates single frequencies many times)."""
-    if not isinstance(open_loop, control.StateSpace):
-        return np.asarray(np.squeeze(control.frequency_response(open_loop, np.atleast_1d(omega)).complex))
-    A, B, C, D = (np.asarray(M, dtype=float) for M in (open_loop.A, open_loop.B, open_loop.C, open_loop.D))
-    w = np.atleast_1d(np.asarray(omega, dtype=float))
-    z = np.exp(1j * w * open_loop.dt) if open_loop.dt else 1j * w
-    if A.shape[0] == 0:
-        return np.squeeze(np.full(w.shape, D[0, 0], dtype=complex))
-    with np.errstate(all="ignore"):
-        x = np.linalg.solve(z[:, None, None] * np.eye(A.shape[0]) - A, np.broadcast_to(B[:, :1], (w.size,) + B[:, :1].shape))
-    return np.squeeze(x[..., 0] @ C[0] + D[0, 0])
-
-
-def _roots(f, omega: np.ndarray, values: np.ndarray) -> list[float]:
-    """Frequencies where ``f`` changes sign between grid points, refined by Brent's method."""
-    found = []
-    for k in np.nonzero(np.sign(values[:-1]) * np.sign(values[1:]) < 0)[0]:
-        found.append(scipy.optimize.brentq(f, omega[k], omega[k + 1], xtol=1e-9 * omega[k]))
-    return found
-
-
-def _closed_loop_stable(open_loop, gain: float) -> bool:
-    """Whether u = -gain · y closes ``open_loop`` stably (poles inside the unit circle, or left half-plane)."""
-    poles = np.asarray(control.feedback(gain * open_loop, 1).poles())
-    return bool(np.all(np.abs(poles) < 1.0)) if open_loop.dt else bool(np.all(poles.real < 0))
-
-
-def loop_margins(open_loop, omega: np.ndarray | None = None) -> Margins:
-    """Margins from the frequency response on ``omega`` (log grid to Nyquist by default):
-    phase crossovers where Im L changes sign with Re L < 0 and gain crossovers where |L| = 1,
-    each refined by Brent's method; |S|max refined around its grid peak."""
-    omega = frequency_grid(open_loop) if omega is None else np.asarray(omega, dtype=float)
-    L = open_loop_response(open_loop, omega)
-
-    def at(w: float) -> complex:
-        return complex(open_loop_response(open_loop, w))
-    gains = []
-    for w in _roots(lambda w: at(w).imag, omega, L.imag):
-        value = at(w)
-        if value.real < 0:
-            gains.append(1.0 / abs(value))
-    # L is real at ω = 0 (and at the Nyquist frequency of a discrete loop): a crossing there
-    # (an unstable plant under a loop without integrator: the lower gain margin) has no sign change
-    for point in ((1.0, -1.0) if open_loop.dt else (0.0,)):
-        with np.errstate(all="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore")              # singular at z = 1 for a loop with an integrator
-            value = complex(np.squeeze(open_loop(point)))
-        if np.isfinite(value) and value.real < 0 and abs(value.imag) <= 1e-9 * abs(value):
-            gains.append(1.0 / abs(value))
-    phase_margins = [(float(np.degrees(np.angle(-at(w)))), w)
-                     for w in _roots(lambda w: abs(at(w)) - 1.0, omega, np.abs(L) - 1.0)]
-    pm, wc = min(phase_margins, key=lambda p: abs(p[0]), default=(np.inf, np.nan))
-    stable = _closed_loop_stable(open_loop, 1.0)
-    if not stable:
-        # with several unstable closed-loop poles, a crossing of -1 may move one pair and leave others:
-        # only the gain factors where stability changes are margins
-        gains = [g for g in gains if _closed_loop_stable(open_loop, 0.99 * g) != _closed_loop_stable(open_loop, 1.01 * g)]
-    values = 1.0 / np.abs(1.0 + L)
-    k = int(np.argmax(values))
-    lo, hi = omega[max(k - 1, 0)], omega[min(k + 1, len(omega) - 1)]
-    refined = scipy.optimize.minimize_scalar(lambda w: -1.0 / abs(1.0 + at(w)), bounds=(lo, hi),
-                                             method="bounded", options={"xatol": 1e-7 * omega[k]})
-    peak, peak_w = (-refined.fun, refined.x) if -refined.fun > values[k] else (values[k], omega[k])
-    return Margins(min((g for g in gains if g > 1), default=np.inf),
-                   max((g for g in gains if g < 1), default=0.0),
-                   abs(pm) if np.isfinite(pm) else np.inf, float(wc), float(peak), float(peak_w), stable)
 
 
 # -- physical names of modes (the pole map) ---------------------------------------------------------

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.optimize import linear_sum_assignment
 
-from lab_modules import analysis
+from lab_modules import analysis, loop_responses
 from lab_modules.controllers.pid import pid
 from lab_modules.controllers.pid import setpoint_filter as pid_setpoint_filter
 from lab_modules.exercises.kalman_noise import EXERCISE, setup
@@ -186,11 +186,11 @@ def test_noise_spectrum_integrates_to_the_lyapunov_variance(use_estimate):
 @pytest.mark.parametrize("use_estimate", [False, True])
 @pytest.mark.parametrize("input_name", ["reference_m", "disturbance_n"])
 def test_compiled_step_response_equals_python_control(use_estimate, input_name):
-    """``analysis.step_response`` (compiled recursion) = python-control's
+    """``loop_responses.step_response`` (compiled recursion) = python-control's
     ``step_response`` of the same loop, every output, to 1e-9 of its peak."""
     loop = kalman_noise_setup(use_estimate=use_estimate).loop()
     n = 2000
-    ours = analysis.step_response(loop, input_name, n)
+    ours = loop_responses.step_response(loop, input_name, n)
     j = analysis.LOOP_INPUTS.index(input_name)
     theirs = control.step_response(loop.system[:, j], T=np.arange(n) * T).outputs   # (outputs, time)
     theirs = np.asarray(theirs).reshape(len(analysis.LOOP_OUTPUTS), n).T
@@ -201,16 +201,16 @@ def test_compiled_step_response_equals_python_control(use_estimate, input_name):
 
 @pytest.mark.parametrize("use_estimate", [False, True])
 def test_peak_gain_is_the_largest_frequency_response(use_estimate):
-    """``analysis.peak_gain`` of force -> position: not below python-control's
+    """``loop_responses.peak_gain`` of force -> position: not below python-control's
     magnitude anywhere on a dense grid (within 1e-6), and equal to it at the
     frequency it reports; ``frequency_gain`` = python-control to 1e-9."""
     loop = kalman_noise_setup(use_estimate=use_estimate).loop()
     grid = np.geomspace(0.5, 0.499 / T, 4000)
     j, i = analysis.LOOP_INPUTS.index("disturbance_n"), analysis.LOOP_OUTPUTS.index("x_m")
     reference = control.frequency_response(loop.system[i, j], 2 * np.pi * grid).magnitude.ravel()
-    ours = analysis.frequency_gain(loop, "disturbance_n", "x_m", grid)
+    ours = loop_responses.frequency_gain(loop, "disturbance_n", "x_m", grid)
     np.testing.assert_allclose(ours, reference, rtol=1e-9)
-    peak, at_hz = analysis.peak_gain(loop, "disturbance_n", "x_m")
+    peak, at_hz = loop_responses.peak_gain(loop, "disturbance_n", "x_m")
     assert peak >= reference.max() * (1 - 1e-6)
     there = control.frequency_response(loop.system[i, j], [2 * np.pi * at_hz]).magnitude.ravel()[0]
     assert there == pytest.approx(peak, rel=1e-9)
@@ -245,3 +245,54 @@ def test_reference_filter_changes_only_the_reference_channel():
         theirs = control.frequency_response(channel, omega).complex
         np.testing.assert_allclose(np.asarray(ours), np.asarray(theirs), rtol=1e-7, atol=1e-18)
     assert pole_distance(analysis.loop_poles(filtered), analysis.loop_poles(loop)) <= 1e-12
+
+
+@pytest.mark.parametrize("use_estimate", [False, True])
+def test_closed_loop_matrices_are_the_python_control_loop(use_estimate):
+    """``closed_loop_matrices`` (the sweeps' loops) holds the very matrices of ``closed_loop``, and
+    ``with_reference_filter`` keeps each kind, with the same matrices."""
+    axis = kalman_noise_setup(use_estimate=use_estimate)
+    arguments = (axis.model, axis.controller, axis.steady_state_filter[0], use_estimate)
+    light, full = analysis.closed_loop_matrices(*arguments), analysis.closed_loop(*arguments)
+    prefilter = pid_setpoint_filter(50e-3, 3e-3, 0.3e-3, T)
+    light_filtered, full_filtered = (analysis.with_reference_filter(loop, prefilter) for loop in (light, full))
+    assert isinstance(light_filtered.system, analysis.Matrices)
+    assert isinstance(full_filtered.system, control.StateSpace)
+    for a, b in ((light, full), (light_filtered, full_filtered)):
+        assert a.loop_states == b.loop_states and a.system.dt == b.system.dt
+        for name in "ABCD":
+            assert np.array_equal(getattr(a.system, name), np.asarray(getattr(b.system, name)))
+
+
+def unit_step_outputs_twin(A, b, C, d, n_samples):
+    """The plain twin of the compiled step recursions: y_k = C x_k + d, x_{k+1} = A x_k + b from x_0 = 0,
+    each sum taken left to right from d_r or b_r (the order the kernels keep)."""
+    def sum_from(start, terms):
+        for term in terms:
+            start += term
+        return start
+    x, y = np.zeros(A.shape[0]), np.empty((n_samples, C.shape[0]))
+    for k in range(n_samples):
+        y[k] = [sum_from(d[r], C[r] * x) for r in range(C.shape[0])]
+        x = np.array([sum_from(b[r], A[r] * x) for r in range(A.shape[0])])
+    return y
+
+
+@pytest.mark.parametrize("prefiltered", [False, True])
+@pytest.mark.parametrize("use_estimate", [False, True])
+def test_compiled_step_responses_equal_their_plain_twin_to_the_last_bit(use_estimate, prefiltered):
+    """``step_response`` and ``step_responses`` (two inputs in one pass) = the plain recursion, bit for
+    bit, on loops with an even and an odd number of states (the paired kernel's last row)."""
+    loop = kalman_noise_setup(use_estimate=use_estimate).loop()
+    if prefiltered:                     # a first-order reference filter: one state more, an odd number
+        loop = analysis.with_reference_filter(loop, control.ss([[0.5]], [[0.5]], [[1.0]], [[0.0]], T))
+    A, B, C, D = (np.asarray(M, dtype=float) for M in (loop.system.A, loop.system.B, loop.system.C, loop.system.D))
+    assert A.shape[0] % 2 == int(prefiltered)
+    n = 300
+    names = ("disturbance_n", "reference_m")
+    twins = [unit_step_outputs_twin(A, B[:, j], C, D[:, j], n) for j in map(analysis.LOOP_INPUTS.index, names)]
+    assert np.max(np.abs(twins[1])) > 0 and np.max(np.abs(twins[0])) > 0
+    for ours, twin in zip(loop_responses.step_responses(loop, names, n), twins):
+        assert np.array_equal(ours, twin)
+    for name, twin in zip(names, twins):
+        assert np.array_equal(loop_responses.step_response(loop, name, n), twin)

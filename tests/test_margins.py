@@ -16,6 +16,7 @@ from lab_modules import analysis
 from lab_modules.evaluation.margins import MARGIN_GRID_POINTS, margin_view
 from lab_modules.exercises import get
 from lab_modules.exercises.kalman_noise import setup
+from lab_modules.loop_sensitivity import frequency_grid, iso_zone, loop_margins
 from tests.example_exercise import contract_exercises
 
 
@@ -30,7 +31,7 @@ def _direct_sensitivity_peak(loop: control.StateSpace, omega: np.ndarray) -> flo
 def test_textbook_loop_agrees_with_control_margin():
     loop = control.ss(control.tf([4.0], [1.0, 3.0, 2.0, 0.0]))   # 4 / (s (s + 1) (s + 2))
     gm, pm, _, wcp = control.margin(loop)
-    m = analysis.loop_margins(loop, np.logspace(-2, 2, 2000))
+    m = loop_margins(loop, np.logspace(-2, 2, 2000))
     assert m.gain_margin == pytest.approx(gm, rel=0.01)
     assert m.phase_margin_deg == pytest.approx(pm, rel=0.01)
     assert m.gain_crossover_rad_s == pytest.approx(wcp, rel=0.01)
@@ -41,7 +42,7 @@ def test_textbook_loop_agrees_with_control_margin():
 def test_bearing_loop_margins_bracket_stability(feedback):
     axis = setup(get("kalman_noise").resolve({"feedback": feedback}))
     loop = axis.loop_at_plant_input()
-    m = analysis.loop_margins(loop)
+    m = loop_margins(loop)
 
     def stable(g: float) -> bool:
         return bool(np.max(np.abs(control.feedback(g * loop, 1).poles())) < 1.0)
@@ -52,17 +53,17 @@ def test_bearing_loop_margins_bracket_stability(feedback):
     # the broken loop closes to the exercise's loop: same spectral radius
     assert max(abs(control.feedback(loop, 1).poles())) == pytest.approx(
         max(abs(analysis.loop_poles(axis.loop()))), rel=1e-6)
-    omega = analysis.frequency_grid(loop, points=20000)
+    omega = frequency_grid(loop, points=20000)
     assert m.sensitivity_peak == pytest.approx(_direct_sensitivity_peak(loop, omega), rel=0.01)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         _, pm_frd, _, _ = control.margin(control.frd(loop, omega[::4]))
     assert m.phase_margin_deg == pytest.approx(pm_frd, rel=0.01)
-    assert m.zone == analysis.iso_zone(m.sensitivity_peak)
+    assert m.zone == iso_zone(m.sensitivity_peak)
 
 
 def test_iso_zones_and_the_analysis_tab_view():
-    assert [analysis.iso_zone(p) for p in (2.9, 3.5, 4.5, 5.5)] == ["A", "B", "C", "D"]
+    assert [iso_zone(p) for p in (2.9, 3.5, 4.5, 5.5)] == ["A", "B", "C", "D"]
     readouts, plots, _ = margin_view(get("lqg_vs_pid"), get("lqg_vs_pid").resolve({}))
     labels = [label for label, _, _ in readouts]
     assert any("PID: |S|max, ISO 14839-3 zone" in label for label in labels)
@@ -148,11 +149,11 @@ def test_margins_of_every_loop(name, settings):
     values = exercise.resolve(settings)
     dense = None
     for label, loop in exercise.open_loops(values).items():
-        m = analysis.loop_margins(loop, analysis.frequency_grid(loop, points=MARGIN_GRID_POINTS))
-        dense = analysis.frequency_grid(loop, points=20000)
+        m = loop_margins(loop, frequency_grid(loop, points=MARGIN_GRID_POINTS))
+        dense = frequency_grid(loop, points=20000)
         # |S|max against 1 / |1 + C (zI - A)^-1 B + D| on a dense grid
         assert m.sensitivity_peak == pytest.approx(_direct_sensitivity_peak(loop, dense), rel=0.01), label
-        assert m.zone == (analysis.iso_zone(m.sensitivity_peak) if m.stable else "D")
+        assert m.zone == (iso_zone(m.sensitivity_peak) if m.stable else "D")
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             gm_frd, pm_frd, _, wc_frd = control.margin(control.frd(loop, dense[::4]))
@@ -196,7 +197,7 @@ def test_broken_loops_close_to_the_exercises_own_loops():
         # the exercise's own search (raising the PID gain from the smallest that levitates) ends
         # where the margin says: gain factor × gain margin
         largest, _ = sensor_placement.largest_stable_gain(values)
-        m = analysis.loop_margins(loop, analysis.frequency_grid(loop, points=MARGIN_GRID_POINTS))
+        m = loop_margins(loop, frequency_grid(loop, points=MARGIN_GRID_POINTS))
         edge = m.gain_margin if m.stable else m.gain_margin_down
         assert values["gain_factor"] * edge == pytest.approx(largest, abs=0.006)
 

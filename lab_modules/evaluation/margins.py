@@ -15,8 +15,14 @@ from typing import NamedTuple
 
 import numpy as np
 
-from lab_modules import analysis
 from lab_modules.exercises import Analysis, Exercise, Plot
+from lab_modules.loop_sensitivity import (
+    ISO_14839_ZONES,
+    Margins,
+    frequency_grid,
+    loop_margins,
+    open_loop_response,
+)
 
 COLORS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd")
 ZONE_COLORS = ("#2ca02c", "#ff7f0e", "#d62728")     # the A/B, B/C and C/D limits
@@ -38,15 +44,15 @@ def margin_view(exercise: Exercise, values: dict) -> MarginView:
     loops = exercise.open_loops(values)
     if not loops:
         return MarginView([], [], [exercise.no_feedback_loop] if exercise.no_feedback_loop else [])
-    found = {name: analysis.loop_margins(loop, analysis.frequency_grid(loop, points=MARGIN_GRID_POINTS))
+    found = {name: loop_margins(loop, frequency_grid(loop, points=MARGIN_GRID_POINTS))
              for name, loop in loops.items()}
     # the plots' grid, plus each loop's |S| peak and crossover: a narrow resonance peak is drawn at its height
     extra = [w for m in found.values() for w in (m.sensitivity_peak_rad_s, m.gain_crossover_rad_s) if np.isfinite(w)]
-    omega = np.unique(np.concatenate([analysis.frequency_grid(next(iter(loops.values())), points=400), extra]))
+    omega = np.unique(np.concatenate([frequency_grid(next(iter(loops.values())), points=400), extra]))
     readouts, magnitude, phase, sens, notes = [], [], [], [], []
     for (name, loop), color in zip(loops.items(), COLORS):
         m = found[name]
-        L = analysis.open_loop_response(loop, omega)
+        L = open_loop_response(loop, omega)
         readouts += _margin_readouts(name, m)
         if not np.isfinite(m.gain_margin):
             notes.append(f"{name}: the phase of L never crosses −180° above the loop's gain: no upper gain margin.")
@@ -60,7 +66,7 @@ def margin_view(exercise: Exercise, values: dict) -> MarginView:
         sens.append((f"|S| {name}", _decibels_of(1.0 / np.abs(1.0 + L)), color))
     f_hz = omega / (2 * np.pi)
     limits = tuple((f"zone limit {zone}/{chr(ord(zone) + 1)} ({limit:g}×)", np.full(len(f_hz), _decibels(limit)), c)
-                   for (zone, limit), c in zip(analysis.ISO_14839_ZONES[:3], ZONE_COLORS))
+                   for (zone, limit), c in zip(ISO_14839_ZONES[:3], ZONE_COLORS))
     plots = [
         Plot("Open loop L at the plant input: magnitude (|L| = 1 at the gain crossover)", "frequency [Hz]",
              "|L| [1]", f_hz, tuple(magnitude) + (("|L| = 1", np.ones(len(f_hz)), "#7f7f7f"),),
@@ -84,7 +90,7 @@ def _decibels_of(factors: np.ndarray) -> np.ndarray:
         return np.where(factors > 0, 20.0 * np.log10(np.where(factors > 0, factors, 1.0)), np.nan)
 
 
-def _margin_readouts(name: str, m: analysis.Margins) -> list[tuple[str, float, str]]:
+def _margin_readouts(name: str, m: Margins) -> list[tuple[str, float, str]]:
     """Gain margins as factors and in dB, phase margin, gain crossover, |S|max and its ISO zone."""
     rows = []
     if np.isfinite(m.gain_margin):

@@ -14,7 +14,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from lab_modules import analysis
+from lab_modules import analysis, loop_responses
 from lab_modules.controllers.lqr import PAPER_LQR_WEIGHTS, lqr
 from lab_modules.controllers.pid import pid, setpoint_filter
 from lab_modules.exercises import Plot
@@ -80,7 +80,7 @@ PID_FRONT_SETTINGS = (*_SHARED_FRONT_SETTINGS, "pid_feedback", "pid_gain", "inte
                       "derivative_time_ms", "derivative_filter_us")
 
 
-def _linear_common(names: tuple[str, ...], key: tuple) -> tuple[dict, AxisSetup]:
+def linear_common(names: tuple[str, ...], key: tuple) -> tuple[dict, AxisSetup]:
     """Slider values (the front's settings, the rest neutral) and the shared set-up
     on the linear plant, its filter solved once for every design of the sweep."""
     values = dict(zip(names, key))
@@ -93,7 +93,7 @@ def _linear_common(names: tuple[str, ...], key: tuple) -> tuple[dict, AxisSetup]
 
 @lru_cache(maxsize=16)
 def _lqg_front(key: tuple) -> Designs:
-    values, common = _linear_common(LQG_FRONT_SETTINGS, key)
+    values, common = linear_common(LQG_FRONT_SETTINGS, key)
     rows = []
     for factor_xv in FRONT_LQG_FACTORS:
         for factor_integral in FRONT_LQG_FACTORS:
@@ -104,26 +104,39 @@ def _lqg_front(key: tuple) -> Designs:
 
 @lru_cache(maxsize=16)
 def _pid_front(key: tuple) -> Designs:
-    values, common = _linear_common(PID_FRONT_SETTINGS, key)
+    values, common = linear_common(PID_FRONT_SETTINGS, key)
     rows = []
     ratio = derivative_filter_ratio(values)
     integral_time_s = in_si(SET_UP_CONTROLS, values)["integral_time_ms"]
+    use_estimate, kalman_gain = values["pid_feedback"] == "estimated", common.steady_state_filter[0]
     for derivative_time_s in FRONT_PID_DERIVATIVE_TIMES_S:
-        at_slider_gain = pid(values["pid_gain"], integral_time_s,
-                             derivative_time_s, ratio * derivative_time_s, T)
+        at_slider_gain = _pid(values["pid_gain"], integral_time_s, derivative_time_s, ratio * derivative_time_s)
         prefilter = _setpoint_filter(integral_time_s, derivative_time_s, ratio * derivative_time_s)
+        A_c, B_c, C_c, D_c = at_slider_gain.A, at_slider_gain.B, at_slider_gain.C, at_slider_gain.D
         for factor in FRONT_PID_GAIN_FACTORS:
-            axis = common.with_changes(controller=factor * at_slider_gain,
-                                       use_estimate=values["pid_feedback"] == "estimated")
-            loop = axis.loop()                  # built once: the I-PD is this loop with the prefilter
-            row = loop_figures(axis, loop)
+            # factor * C(z) scales B_c and D_c (as python-control does): the same loop as
+            # common.with_changes(controller=factor * pid(...)).loop(), without its objects
+            controller = analysis.Matrices(A_c, factor * B_c, C_c, factor * D_c, T)
+            loop = analysis.closed_loop_matrices(common.model, controller, kalman_gain, use_estimate)
+            row = loop_figures(common, loop)    # the noise is common's; the I-PD is this loop, prefiltered
             if row["min_damping"] > 0:
                 ipd = analysis.with_reference_filter(loop, prefilter)
-                current = analysis.step_response(ipd, "reference_m", round(LINEAR_WINDOW_S / T))
+                current = loop_responses.step_response(ipd, "reference_m", round(LINEAR_WINDOW_S / T))
                 row["peak_current_ipd_a_per_m"] = float(np.max(np.abs(
                     current[:, analysis.LOOP_OUTPUTS.index("current_a")])))
             rows.append(row)
     return _designs(rows)
+
+
+@lru_cache(maxsize=64)
+def _pid(gain: float, integral_time_s: float, derivative_time_s: float, derivative_filter_s: float
+         ) -> analysis.Matrices:
+    """``controllers.pid.pid``'s matrices: a move of any slider but the PID's (the filter's, the
+    noise) reuses the sweep's seven (each a c2d through python-control, a tenth of the PID front's
+    time).  Shared: not to be modified."""
+    controller = pid(gain, integral_time_s, derivative_time_s, derivative_filter_s, T)
+    return analysis.Matrices(*(np.asarray(M, dtype=float) for M in (controller.A, controller.B, controller.C,
+                                                                     controller.D)), T)
 
 
 @lru_cache(maxsize=64)

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lab_modules import analysis
+from lab_modules import analysis, loop_responses
 from lab_modules.loops.radial_axis_experiment import AxisSetup, AxisSimulation
 from lab_modules.loops.radial_axis_loop import TRACE_COLUMNS
 from lab_modules.plants.radial_bearing import RIG
@@ -137,11 +137,11 @@ def linear_figures(loop: analysis.Loop) -> dict[str, float]:
                 "peak_current_a_per_m": nan, "settling_time_s": nan, "min_damping": damping}
     n = round(LINEAR_WINDOW_S / T)
     x_index, i_index = analysis.LOOP_OUTPUTS.index("x_m"), analysis.LOOP_OUTPUTS.index("current_a")
-    force = analysis.step_response(loop, "disturbance_n", n)[:, x_index]
-    reference = analysis.step_response(loop, "reference_m", n)
+    force, reference = loop_responses.step_responses(loop, ("disturbance_n", "reference_m"), n)
+    force = force[:, x_index]
     x = reference[:, x_index]
     outside = np.flatnonzero(np.abs(x - 1.0) > SETTLING_BAND)
-    compliance, frequency = analysis.peak_gain(loop, "disturbance_n", "x_m")
+    compliance, frequency = loop_responses.peak_gain(loop, "disturbance_n", "x_m")
     return {"step_stiffness_n_per_m": 1.0 / float(np.max(np.abs(force))),
             "min_dynamic_stiffness_n_per_m": 1.0 / compliance,
             "min_dynamic_stiffness_frequency_hz": frequency,
