@@ -8,10 +8,9 @@ with white current noise of variance var_process [A²] per sample (the "process
 noise" of §E; the filter's Q = var_process·b bᵀ models exactly this), limited to
 |i| ≤ i0 (a coil current cannot be negative).
 
-Controller (not in the paper; a lab choice): PID on the measured position,
-x_M / K_Sen, with derivative on the measurement (filtered, τ_D), gravity
-feed-forward m g / k_i(centre), and a first-order reference filter so that the
-moves between operating points do not saturate the amplifier.
+Controller (not in the paper; a lab choice): PID on the measured position, x_M / K_Sen, with
+derivative on the measurement (filtered, τ_D), gravity feed-forward m g / k_i(centre), and a
+first-order reference filter so that the moves between operating points do not saturate the amplifier.
 
 Four filters run side by side on the same measurements and currents (they do not
 act on the loop): 0 fixed k_i, k_s (centre values, §B); 1 scheduled by the FBFNN
@@ -235,19 +234,17 @@ def plant_sample(x, v, xm, current, load, k_magnet, rig, sample_time_s):
 
 @njit(cache=True, nogil=True)
 def run(n_steps, state, physics, schedule, pid, filters, identification, noise, out):
-    """Advance ``n_steps`` samples; writes rows (time, *COLUMNS) into ``out``;
-    returns the number of rows written (fewer after a touchdown).
+    """Advance ``n_steps`` samples; writes rows (time, *COLUMNS) into ``out``; returns the rows written
+    (fewer after a touchdown).
 
     state : (N_LOOP_STATE,) the loop's state (indices ``S_T`` ...), in place;
     physics : ``scheduled_kalman.physics_vector`` of the filters' model (indices ``MASS`` ...);
-    schedule : ``Schedule``; pid : ``AxialPID``; filters : ``FilterBank`` (in place);
-    identification : ``Identification``;
+    schedule, pid, filters (in place), identification : ``Schedule``, ``AxialPID``, ``FilterBank``, ``Identification``;
     noise : (n_steps, 4) draws: sensor [V], current [A], measured force [N], force random walk [N].
 
     The filters' steps are ``scheduled_kalman``'s written-out 4×4 kernels (no BLAS calls, no
     temporaries): a sample costs about 1 µs."""
-    # every field read once, before the loop: an array read out of a bundle inside the loop
-    # would cost a reference count per sample
+    # every field read once, before the loop (a bundle's array read per sample costs a reference count)
     segments, period, load_ramp = schedule.segments, schedule.period_s, schedule.load_ramp_s
     k_magnet_nominal, filter_z, filter_P = schedule.k_magnet, filters.z, filters.P
     centres, fbf_ki_w, fbf_ki_s = identification.centres, identification.ki_weights, identification.ki_widths

@@ -229,12 +229,10 @@ def run(n_steps, t0, dt, ball, ekf, control, refs, noise, trace):
     refs : (n_steps, 4) y_R, y_R', y_R'', y_R''' [m, m/s, m/s², m/s³].
     noise : (n_steps, 3) standard normal draws: sensor, velocity, current.
     trace : (n_steps, 1 + len(TRACE_COLUMNS)) output."""
-    # every field read once, before the loop: an array read out of a bundle inside the loop
-    # would cost a reference count per sample
+    # every field read once, before the loop (a bundle's array read per sample costs a reference count)
     x, p_true, plant_q, sensor_variance = ball.state, ball.constants, ball.process_density, ball.sensor_variance_m2
     filter_kind, x_hat, P, Q, r, p, substeps = ekf.kind, ekf.x_hat, ekf.P, ekf.Q, ekf.R_m2, ekf.constants, ekf.substeps
-    controller, k, u0 = control.kind, control.gain, control.u0_v
-    lead_lag = control.lead_lag
+    controller, k, u0, lead_lag = control.kind, control.gain, control.u0_v, control.lead_lag
     xc, Ac, Bc, Cc, Dc = lead_lag.state, lead_lag.A, lead_lag.B, lead_lag.C, lead_lag.D
     gain = np.empty(3)
     x_next = np.empty(3)
