@@ -147,8 +147,7 @@ class Tab:
                 self.answers.append({"type": "GuiUpdateMessage", "uuid": message["uuid"],
                                      "updates": {"value": self.switch_to}})
                 self.switch_to = None
-            elif kind == "GuiButtonMessage" and label in (f"{SHOWN_LABEL} {self.panel}", f"{HIDDEN_LABEL} {SCOPE}") \
-                    and label != f"{HIDDEN_LABEL} {self.panel}":   # as the browser's beacons: this panel, not the Scope
+            elif kind == "GuiButtonMessage" and label in self.beacons_clicked():   # as the browser's beacons
                 self.answers.append({"type": "GuiUpdateMessage", "uuid": message["uuid"], "updates": {"value": True}})
             return "GUI set-up"
         if kind.startswith("Scene") or kind.endswith("SceneNodeMessage") or "Mesh" in kind or "Label" in kind:
@@ -252,6 +251,10 @@ class Tab:
 
     def _ended(self, why: str) -> None:
         self.closed, self.ended_at = why, time.perf_counter()
+
+    def beacons_clicked(self) -> tuple[str, ...]:
+        """The beacon buttons a browser on ``panel`` clicks: that panel shown, and the Scope hidden."""
+        return (f"{SHOWN_LABEL} {self.panel}",) + (() if self.watches_scope else (f"{HIDDEN_LABEL} {SCOPE}",))
 
     @property
     def watches_scope(self) -> bool:
